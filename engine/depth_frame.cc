@@ -1,0 +1,39 @@
+#include "engine/depth_frame.h"
+
+#include <cmath>
+
+namespace sf {
+
+std::size_t DepthFrame::valid_count() const {
+  std::size_t n = 0;
+  for (auto v : valid) n += v ? 1 : 0;
+  return n;
+}
+
+void fill_perspective_samples(DepthFrame& frame, const std::vector<float>& depth, bool ray_distance) {
+  const std::size_t n = frame.size();
+  frame.valid.assign(n, 0);
+  frame.position.assign(n, Eigen::Vector3f::Zero());
+  frame.image_pos.assign(n, Eigen::Vector2f::Zero());
+  frame.footprint.assign(n, 0.f);
+  const Sensor& s = frame.sensor;
+  const Eigen::Matrix3d Rt = s.R.transpose();
+  const double f_mean = std::sqrt(s.fx * s.fy);
+  for (int row = 0; row < frame.height; ++row) {
+    for (int col = 0; col < frame.width; ++col) {
+      const std::size_t i = std::size_t(row) * frame.width + col;
+      const double d = depth[i];
+      if (!(d > 0) || !std::isfinite(d)) continue;
+      const double u = col + 0.5, v = row + 0.5;
+      const Eigen::Vector3d ray((u - s.cx) / s.fx, (v - s.cy) / s.fy, 1.0);
+      const double z = ray_distance ? d / ray.norm() : d;
+      const Eigen::Vector3d Xc = z * ray;
+      frame.valid[i] = 1;
+      frame.position[i] = (Rt * (Xc - s.t)).cast<float>();
+      frame.image_pos[i] = Eigen::Vector2f(float(u), float(v));
+      frame.footprint[i] = float(z / f_mean);
+    }
+  }
+}
+
+}  // namespace sf

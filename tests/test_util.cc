@@ -1,0 +1,33 @@
+#include "tests/test_util.h"
+
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <sys/wait.h>
+
+namespace sf::test {
+
+std::filesystem::path scratch_dir(const std::string& name) {
+  auto dir = std::filesystem::temp_directory_path() / ("scalefuse-test-" + std::to_string(::getpid())) / name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+std::filesystem::path shared_data() { return SCALEFUSE_SHARED_DATA; }
+std::filesystem::path scalefuse_binary() { return SCALEFUSE_BINARY; }
+
+int run_command(const std::string& command, std::string* log) {
+  const std::string full = command + " 2>&1";
+  FILE* pipe = ::popen(full.c_str(), "r");
+  if (!pipe) return -1;
+  std::array<char, 4096> buf;
+  std::size_t n;
+  while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0)
+    if (log) log->append(buf.data(), n);
+  const int status = ::pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+}  // namespace sf::test

@@ -1,0 +1,17 @@
+#pragma once
+// Helpers shared by tests: scratch folders and paths to data.
+#include <filesystem>
+#include <string>
+
+namespace sf::test {
+
+// A fresh, empty folder under the system temp dir, unique to this process and name.
+std::filesystem::path scratch_dir(const std::string& name);
+// ../shared/data next to the repository (CI has it beside the clone).
+std::filesystem::path shared_data();
+// The built command-line program.
+std::filesystem::path scalefuse_binary();
+// Runs a shell command, returns its exit status (0 = success); output goes to `log` if given.
+int run_command(const std::string& command, std::string* log = nullptr);
+
+}  // namespace sf::test
