@@ -1,2 +1,38 @@
-#include <iostream>
-int main() { std::cout << "scalefuse\n"; return 0; }
+// scalefuse command-line entry: subcommands register themselves (cli/commands.h); errors become
+// one line on stderr and an exit code: 2 for bad input, 1 for internal errors.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <exception>
+
+#include "cli/commands.h"
+#include "engine/error.h"
+#include "engine/vdb_export.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"scalefuse: fusion of depth maps with multiple scales (Fuhrmann & Goesele 2011)"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "scalefuse 0.1.0");
+  sf::cli::add_fuse_command(app);
+  sf::cli::add_synth_command(app);
+  sf::cli::add_eval_command(app);
+  try {
+    sf::initialize_vdb();
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    app.exit(e);
+    return 2;
+  } catch (const sf::InputError& e) {
+    std::fprintf(stderr, "scalefuse: error: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "scalefuse: internal error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

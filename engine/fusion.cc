@@ -1,0 +1,217 @@
+#include "engine/fusion.h"
+
+#include <sys/resource.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <mutex>
+#include <sstream>
+
+#include "engine/error.h"
+
+namespace sf {
+
+void OctreeOptions::check() const {
+  if (!(padding >= 0 && padding <= 1)) throw InputError("octree.padding must be in [0, 1]");
+  if (brick_level < 0 || brick_level > 10) throw InputError("octree.brick_level must be in 0..10");
+  parse_bbox(bbox);
+}
+
+void FusionOptions::check() const {
+  input.check();
+  triangulate.check();
+  integrate.check();
+  regularize.check();
+  extract.check();
+  octree.check();
+}
+
+void register_parameters(ParameterSet& s, FusionOptions& o) {
+  s.add("input.format", &o.input.format, "", "auto | colmap | mve | rgbd | rangegrid");
+  s.add("input.colmap_maps", &o.input.colmap_maps, "", "COLMAP depth maps to read: geometric | photometric");
+  s.add("input.mve_depth", &o.input.mve_depth, "", "MVE depth embedding (distance along the ray)");
+  s.add("input.mve_image", &o.input.mve_image, "", "MVE colour embedding");
+  s.add("input.mve_confidence", &o.input.mve_confidence, "", "MVE confidence embedding");
+  s.add("input.rgbd_depth_scale", &o.input.rgbd_depth_scale, "m/unit", "metres per depth-PNG unit");
+  s.add("input.rgbd_use_colour", &o.input.rgbd_use_colour, "", "colour RGB-D meshes from *.color.png|jpg");
+  s.add("triangulate.rho", &o.triangulate.rho, "footprints", "depth discontinuity threshold ρ");
+  s.add("integrate.lambda", &o.integrate.lambda, "", "sampling rate λ (equation 1)");
+  s.add("integrate.gamma", &o.integrate.gamma, "cells", "ramp size factor γ: ramp = γ × cell size");
+  s.add("integrate.coarser_levels", &o.integrate.coarser_levels, "levels", "extra insertion into coarser levels");
+  s.add("integrate.coarse_reach", &o.integrate.coarse_reach, "own ramps",
+        "coarser-level ramps reach at most this many own ramps; 0 = paper (unbounded)");
+  s.add("integrate.min_cosine", &o.integrate.min_cosine, "", "skip triangles seen more grazing than this");
+  s.add("integrate.max_level", &o.integrate.max_level, "level", "deepest octree level");
+  s.add("regularize.tau0", &o.regularize.tau0, "weight", "saturation threshold τ0 (0: no blending)");
+  s.add("regularize.tau1", &o.regularize.tau1, "weight", "confidence threshold τ1 (weaker voxels are deleted)");
+  s.add("extract.neighbourhood_n", &o.extract.neighbourhood_n, "voxels", "n of the neighbourhood rule (7.1)");
+  s.add("extract.snap_fraction", &o.extract.snap_fraction, "edge", "vertex snapping distance (7.2); 0 = off");
+  s.add("extract.min_component_triangles", &o.extract.min_component_triangles, "triangles",
+        "remove connected components smaller than this; 0 = keep all");
+  s.add("octree.bbox", &o.octree.bbox, "m", "clip box xmin,ymin,zmin,xmax,ymax,zmax; empty = data bounds");
+  s.add("octree.padding", &o.octree.padding, "", "root cube margin, fraction of the data extent per side");
+  s.add("octree.brick_level", &o.octree.brick_level, "level", "2^brick_level bricks per root axis");
+}
+
+std::optional<Eigen::AlignedBox3d> parse_bbox(const std::string& text) {
+  if (text.empty()) return std::nullopt;
+  std::vector<double> v;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      std::size_t used = 0;
+      v.push_back(std::stod(item, &used));
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      throw InputError("octree.bbox: '" + item + "' is not a number");
+    }
+  }
+  if (v.size() != 6) throw InputError("octree.bbox needs 6 numbers xmin,ymin,zmin,xmax,ymax,zmax");
+  Eigen::AlignedBox3d box(Eigen::Vector3d(v[0], v[1], v[2]), Eigen::Vector3d(v[3], v[4], v[5]));
+  if (!(box.min().array() < box.max().array()).all()) throw InputError("octree.bbox: min must be < max on every axis");
+  return box;
+}
+
+RootCube root_cube_for(const Eigen::AlignedBox3d& b, double padding) {
+  const double extent = std::max(b.sizes().maxCoeff(), 1e-6);
+  const double size = extent * (1.0 + 2.0 * padding);
+  RootCube r;
+  r.size = size;
+  r.min = b.center() - Eigen::Vector3d::Constant(size / 2);
+  return r;
+}
+
+std::size_t peak_rss_bytes() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return std::size_t(u.ru_maxrss) * 1024;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+void clip_to_box(DepthFrame& f, const std::optional<Eigen::AlignedBox3d>& box) {
+  if (!box) return;
+  for (std::size_t i = 0; i < f.size(); ++i)
+    if (f.valid[i] && !box->contains(f.position[i].cast<double>())) f.valid[i] = 0;
+}
+
+}  // namespace
+
+Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats_out) {
+  options.check();
+  FusionStats stats;
+  stats.format = source.format();
+  stats.depth_maps = source.size();
+  const auto clip = parse_bbox(options.octree.bbox);
+  auto stage_start = Clock::now();
+  auto end_stage = [&](const char* name) {
+    const auto now = Clock::now();
+    stats.times.push_back({name, std::chrono::duration<double>(now - stage_start).count()});
+    stage_start = now;
+  };
+
+  // Pass 1: bounds of the data, so the root cube is no larger than the data needs.
+  Eigen::AlignedBox3d bounds;
+  std::mutex bounds_mutex;
+  std::size_t samples = 0, bounded = 0;
+  tbb::parallel_for(std::size_t(0), source.size(), [&](std::size_t i) {
+    DepthFrame f = source.load(i);
+    clip_to_box(f, clip);
+    Eigen::AlignedBox3d b;
+    std::size_t n = 0;
+    for (std::size_t k = 0; k < f.size(); ++k)
+      if (f.valid[k]) {
+        b.extend(f.position[k].cast<double>());
+        ++n;
+      }
+    std::lock_guard lock(bounds_mutex);
+    if (n) bounds.extend(b);
+    samples += n;
+    report(hooks.progress, "bounds", double(++bounded), double(source.size()));
+  });
+  if (samples == 0) throw InputError("the input holds no valid depth samples" + std::string(clip ? " inside octree.bbox" : ""));
+  stats.samples = samples;
+  const RootCube root = clip ? root_cube_for(*clip, 0.0) : root_cube_for(bounds, options.octree.padding);
+  stats.root = root;
+  end_stage("bounds");
+
+  // Pass 2: stream the depth maps through read -> triangulate (parallel) -> integrate (in order).
+  BrickMap map(options.octree.brick_level);
+  struct Item {
+    std::size_t index = 0;
+    DepthFrame frame;
+    std::vector<FrameTriangle> triangles;
+  };
+  std::size_t next = 0, done = 0;
+  IntegrateStats integ;
+  const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
+  tbb::parallel_pipeline(
+      tokens,
+      tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
+                                                    [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
+                                                      if (next >= source.size()) {
+                                                        fc.stop();
+                                                        return nullptr;
+                                                      }
+                                                      auto item = std::make_shared<Item>();
+                                                      item->index = next++;
+                                                      return item;
+                                                    }) &
+          tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
+              tbb::filter_mode::parallel,
+              [&](std::shared_ptr<Item> item) {
+                item->frame = source.load(item->index);
+                clip_to_box(item->frame, clip);
+                item->triangles = triangulate(item->frame, options.triangulate);
+                return item;
+              }) &
+          tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
+            // Depth maps enter the field strictly in index order (equations 2-3 are order-sensitive
+            // in floating point).
+            integ.add(integrate_frame(item->frame, item->triangles, root, options.integrate, map));
+            report(hooks.progress, "integrate", double(++done), double(source.size()));
+          }));
+  stats.triangles = integ.triangles;
+  stats.contributions = integ.contributions;
+  for (int l = 0; l <= kMaxLevel; ++l) stats.triangles_per_level[l] = integ.triangles_per_level[l];
+  end_stage("integrate");
+
+  stats.regularize = regularize(map, options.regularize, hooks.progress);
+  for (int l = 0; l <= kMaxLevel; ++l) {
+    stats.voxels_fused[l] = stats.regularize.voxels_before[l];
+    stats.voxels_regularized[l] = stats.regularize.voxels_after[l];
+  }
+  end_stage("regularize");
+  if (hooks.on_regularized) {
+    hooks.on_regularized(map, root);
+    end_stage("export");
+  }
+
+  std::vector<SurfaceVoxel> voxels;
+  voxels.reserve(map.voxel_count());
+  for (Brick* b : map.bricks())
+    b->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+      SurfaceVoxel s;
+      s.key = k;
+      s.distance = v.distance;
+      s.weight = v.weight;
+      for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
+      voxels.push_back(s);
+    });
+  map.clear();  // release the field before the tetrahedralization
+  std::sort(voxels.begin(), voxels.end(), [](const SurfaceVoxel& a, const SurfaceVoxel& b) { return a.key < b.key; });
+  if (voxels.size() < 4) throw InputError("too few confident voxels to extract a surface (" + std::to_string(voxels.size()) + ")");
+  Mesh mesh = extract_surface(voxels, root, options.extract, hooks.progress, &stats.extract);
+  end_stage("extract");
+  stats.peak_rss_bytes = peak_rss_bytes();
+  if (stats_out) *stats_out = stats;
+  return mesh;
+}
+
+}  // namespace sf

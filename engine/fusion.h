@@ -1,0 +1,75 @@
+#pragma once
+// The whole fusion, input -> triangles -> bricks -> hSDF -> regularized voxels -> tetrahedra -> mesh.
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "engine/extract/extract.h"
+#include "engine/geometry.h"
+#include "engine/input/frame_source.h"
+#include "engine/integrate.h"
+#include "engine/mesh.h"
+#include "engine/parameters.h"
+#include "engine/progress.h"
+#include "engine/regularize.h"
+#include "engine/triangulate.h"
+
+namespace sf {
+
+struct OctreeOptions {
+  // Clip box "xmin,ymin,zmin,xmax,ymax,zmax" in world metres; empty: the data's bounding box.
+  std::string bbox;
+  double padding = 0.05;  // the root cube extends the data's largest extent by this fraction per side
+  int brick_level = 4;    // 2^brick_level bricks per axis of the root cube
+  void check() const;
+};
+
+struct FusionOptions {
+  InputOptions input;
+  TriangulateOptions triangulate;
+  IntegrateOptions integrate;
+  RegularizeOptions regularize;
+  ExtractOptions extract;
+  OctreeOptions octree;
+  void check() const;
+};
+
+// Registers every parameter under its dotted name.
+void register_parameters(ParameterSet& set, FusionOptions& options);
+
+struct StageTime {
+  std::string stage;
+  double seconds = 0;
+};
+
+struct FusionStats {
+  std::string format;
+  std::size_t depth_maps = 0, samples = 0, triangles = 0, contributions = 0;
+  RootCube root;
+  std::array<std::size_t, kMaxLevel + 1> voxels_fused{};        // after integration
+  std::array<std::size_t, kMaxLevel + 1> voxels_regularized{};  // after section 6
+  std::array<std::size_t, kMaxLevel + 1> triangles_per_level{};
+  RegularizeStats regularize;
+  ExtractStats extract;
+  std::vector<StageTime> times;
+  std::size_t peak_rss_bytes = 0;
+};
+
+// Hooks that let the caller see the field (e.g. to export it) without the engine knowing formats.
+struct FusionHooks {
+  ProgressFn progress;
+  std::function<void(const BrickMap&, const RootCube&)> on_regularized;
+};
+
+// Runs the fusion in the calling TBB arena. Throws InputError on bad input.
+Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats);
+
+// The root cube for a set of sample bounds (see OctreeOptions).
+RootCube root_cube_for(const Eigen::AlignedBox3d& data_bounds, double padding);
+// Parses OctreeOptions::bbox; nullopt when empty. Throws InputError on a malformed box.
+std::optional<Eigen::AlignedBox3d> parse_bbox(const std::string& text);
+
+std::size_t peak_rss_bytes();
+
+}  // namespace sf

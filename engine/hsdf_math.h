@@ -1,0 +1,43 @@
+#pragma once
+// The pure formulas of sections 5 and 6, kept apart so tests can check them by hand.
+#include <algorithm>
+#include <cmath>
+
+namespace sf {
+
+// Equation 1: the octree level whose cell size F_box = root_size / 2^l is the largest one not
+// exceeding the triangle footprint / lambda:  l_T = ceil(log2(root_size * lambda / F_tri)).
+// Clamped to [0, max_level]. A ratio within 1e-6 (relative) of a power of two counts as that power,
+// so that footprints stored in float do not flip a level.
+inline int triangle_level(double root_size, double lambda, double footprint, int max_level) {
+  const double l = std::ceil(std::log2(root_size * lambda / footprint) - 1.5e-6);
+  if (!(l > 0)) return 0;
+  return int(std::min<double>(l, max_level));
+}
+
+// The ramp length of a level: gamma times its cell size.
+inline double ramp_length(double gamma, double cell_size) { return gamma * cell_size; }
+
+// Truncated tent of the signed distance over the ramp: 1 on the surface, 0 at +-ramp and beyond.
+inline double tent_weight(double distance, double ramp) {
+  return std::max(0.0, 1.0 - std::abs(distance) / ramp);
+}
+
+// Equations 2-3: adding one contribution (d, w) to a voxel holding (D, W).
+struct DistanceWeight {
+  double distance, weight;
+};
+inline DistanceWeight accumulate(DistanceWeight voxel, DistanceWeight sample) {
+  const double W = voxel.weight + sample.weight;
+  return {(voxel.weight * voxel.distance + sample.weight * sample.distance) / W, W};
+}
+
+// Equations 4-5: blending a sub-confident voxel (w_l < tau0) with the coarser level's
+// interpolated (d_c, w_c). The coarser weight saturates at tau0 (Mitchell's argument).
+inline DistanceWeight regularize_blend(DistanceWeight fine, DistanceWeight coarse, double tau0) {
+  const double k = (tau0 - fine.weight) * std::min(1.0, coarse.weight / tau0);
+  const double w = fine.weight + k;
+  return {(fine.distance * fine.weight + coarse.distance * k) / w, w};
+}
+
+}  // namespace sf

@@ -1,0 +1,82 @@
+#include "engine/input/frame_source.h"
+
+#include <cmath>
+#include <fstream>
+#include <string>
+#include <system_error>
+
+#include "engine/error.h"
+#include "engine/input/file_util.h"
+#include "engine/input/readers.h"
+
+namespace sf {
+
+namespace fs = std::filesystem;
+
+bool InputOptions::check() const {
+  auto bad = [](const std::string& what) { return InputError("input options: " + what); };
+  if (format != "auto" && format != "colmap" && format != "mve" && format != "rgbd" && format != "rangegrid")
+    throw bad("format must be auto, colmap, mve, rgbd or rangegrid, got \"" + format + "\"");
+  if (colmap_maps != "geometric" && colmap_maps != "photometric")
+    throw bad("colmap_maps must be geometric or photometric, got \"" + colmap_maps + "\"");
+  // Embedding names become file names inside the view folder.
+  for (const auto* name : {&mve_depth, &mve_image, &mve_confidence}) {
+    if (name->empty() || name->find('/') != std::string::npos || *name == "." || *name == "..")
+      throw bad("MVE embedding names must be plain file names, got \"" + *name + "\"");
+  }
+  if (!(rgbd_depth_scale > 0) || !std::isfinite(rgbd_depth_scale))
+    throw bad("rgbd_depth_scale must be a positive number of metres per unit, got " + std::to_string(rgbd_depth_scale));
+  return true;
+}
+
+namespace {
+
+bool has_bmesh_line(const fs::path& conf) {
+  std::ifstream in(conf);
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto tokens = input_detail::split_ws(line);
+    if (!tokens.empty() && tokens[0] == "bmesh") return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+std::string detect_input_format(const fs::path& input) {
+  std::error_code ec;
+  if (fs::is_directory(input / "sparse", ec) || fs::is_directory(input / "stereo" / "depth_maps", ec)) return "colmap";
+  if (fs::is_directory(input / "views", ec)) {
+    for (const auto& entry : fs::directory_iterator(input / "views", ec))
+      if (entry.path().extension() == ".mve") return "mve";
+  }
+  bool depth_png = false, conf_with_bmesh = false;
+  for (const auto& entry : fs::directory_iterator(input, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.size() > 10 && name.ends_with(".depth.png")) depth_png = true;
+    if (entry.path().extension() == ".conf" && entry.is_regular_file(ec) && has_bmesh_line(entry.path()))
+      conf_with_bmesh = true;
+  }
+  if (depth_png && fs::is_regular_file(input / "camera-intrinsics.txt", ec)) return "rgbd";
+  if (conf_with_bmesh) return "rangegrid";
+  return "";
+}
+
+std::unique_ptr<FrameSource> open_input(const fs::path& input, const InputOptions& options) {
+  options.check();
+  std::error_code ec;
+  if (!fs::exists(input, ec)) throw input_error(input.string(), "input folder does not exist");
+  if (!fs::is_directory(input, ec)) throw input_error(input.string(), "input is not a folder");
+  std::string format = options.format;
+  if (format == "auto") {
+    format = detect_input_format(input);
+    if (format.empty())
+      throw input_error(input.string(), "not a COLMAP workspace, MVE scene, RGB-D folder or range-grid folder");
+  }
+  if (format == "colmap") return open_colmap(input, options);
+  if (format == "mve") return open_mve(input, options);
+  if (format == "rgbd") return open_rgbd(input, options);
+  return open_rangegrid(input, options);
+}
+
+}  // namespace sf

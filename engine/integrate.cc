@@ -1,0 +1,257 @@
+#include "engine/integrate.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+
+#include "engine/error.h"
+#include "engine/hsdf_math.h"
+
+namespace sf {
+
+void IntegrateOptions::check() const {
+  if (!(lambda > 0)) throw InputError("integrate.lambda must be > 0, got " + std::to_string(lambda));
+  if (!(gamma > 0)) throw InputError("integrate.gamma must be > 0, got " + std::to_string(gamma));
+  if (coarser_levels < 0 || coarser_levels > kMaxLevel)
+    throw InputError("integrate.coarser_levels must be in 0.." + std::to_string(kMaxLevel));
+  if (!(coarse_reach >= 0)) throw InputError("integrate.coarse_reach must be >= 0 (0 = unlimited)");
+  if (!(min_cosine >= 0 && min_cosine < 1)) throw InputError("integrate.min_cosine must be in [0, 1)");
+  if (max_level < 0 || max_level > kMaxLevel)
+    throw InputError("integrate.max_level must be in 0.." + std::to_string(kMaxLevel));
+}
+
+void IntegrateStats::add(const IntegrateStats& o) {
+  triangles += o.triangles;
+  contributions += o.contributions;
+  for (int l = 0; l <= kMaxLevel; ++l) triangles_per_level[l] += o.triangles_per_level[l];
+}
+
+namespace {
+
+using Eigen::Vector2d;
+using Eigen::Vector3d;
+
+inline double cross2(const Vector2d& a, const Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
+
+// A triangle prepared for voxel queries.
+struct PreparedTriangle {
+  Vector3d P[3];
+  Vector2d q[3];          // sensor-plane positions
+  std::uint32_t idx[3];
+  Vector3d normal;        // unit, facing the sensor
+  // Edge e joins local vertices lo[e], hi[e] (ordered by sample index, so the triangle on the
+  // other side computes bit-identical edge functions); side[e] = sign of the edge function at the
+  // opposite vertex, opp_value[e] its value.
+  int lo[3], hi[3];
+  double side[3], opp_value[3];
+  bool ok = false;
+
+  double edge_function(int e, const Vector2d& p) const { return cross2(q[hi[e]] - q[lo[e]], p - q[lo[e]]); }
+
+  // Barycentric coordinates of p if this triangle owns the line of sight through p.
+  bool owns(const Vector2d& p, double bary[3]) const {
+    for (int e = 0; e < 3; ++e) {
+      const double E = edge_function(e, p);
+      const double s = side[e] * E;
+      if (s < 0 || (E == 0 && side[e] < 0)) return false;
+      bary[e] = E / opp_value[e];  // edge e is opposite local vertex e
+    }
+    return true;
+  }
+};
+
+PreparedTriangle prepare(const DepthFrame& f, const FrameTriangle& t) {
+  PreparedTriangle p;
+  for (int k = 0; k < 3; ++k) {
+    p.idx[k] = t[k];
+    p.P[k] = f.position[t[k]].cast<double>();
+    p.q[k] = f.image_pos[t[k]].cast<double>();
+  }
+  Vector3d n = (p.P[1] - p.P[0]).cross(p.P[2] - p.P[0]);
+  const double len = n.norm();
+  if (!(len > 0)) return p;
+  n /= len;
+  const Vector3d centroid = (p.P[0] + p.P[1] + p.P[2]) / 3.0;
+  if (n.dot(f.sensor.ray_direction(centroid)) > 0) n = -n;
+  p.normal = n;
+  for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e
+    int a = (e + 1) % 3, b = (e + 2) % 3;
+    if (p.idx[a] > p.idx[b]) std::swap(a, b);
+    p.lo[e] = a;
+    p.hi[e] = b;
+    const double v = p.edge_function(e, p.q[e]);
+    if (v == 0 || !std::isfinite(v)) return p;  // degenerate in the sensor plane
+    p.opp_value[e] = v;
+    p.side[e] = v > 0 ? 1.0 : -1.0;
+  }
+  p.ok = true;
+  return p;
+}
+
+// Half-space m . X >= k.
+struct HalfSpace {
+  Vector3d m;
+  double k;
+};
+
+}  // namespace
+
+void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, int level, int level_of_triangle,
+                            const RootCube& root, const IntegrateOptions& options, std::vector<Contribution>& out) {
+  const PreparedTriangle T = prepare(frame, tri);
+  if (!T.ok) return;
+  const Sensor& sensor = frame.sensor;
+  const double h = root.cell_size(level);
+  double ramp = ramp_length(options.gamma, h);
+  if (level < level_of_triangle && options.coarse_reach > 0)
+    ramp = std::min(ramp, options.coarse_reach * ramp_length(options.gamma, root.cell_size(level_of_triangle)));
+  const double margin = 1e-3 * h;
+
+  // The truncated prism swept by the lines of sight through the triangle, |distance| <= ramp,
+  // as five half-spaces (three sides, two caps; the caps bound |n.(X-P0)| <= ramp, which contains
+  // |distance| <= ramp since |n.dir| <= 1).
+  HalfSpace planes[5];
+  const bool perspective = sensor.kind == Sensor::Kind::Perspective;
+  const Vector3d C = sensor.centre(), axis = sensor.axis();
+  for (int e = 0; e < 3; ++e) {
+    const Vector3d& A = T.P[(e + 1) % 3];
+    const Vector3d& B = T.P[(e + 2) % 3];
+    Vector3d m = perspective ? (A - C).cross(B - C) : (B - A).cross(axis);
+    if (m.dot(T.P[e] - A) < 0) m = -m;
+    const double mn = m.norm();
+    if (!(mn > 0)) return;
+    m /= mn;
+    planes[e] = {m, m.dot(A) - margin};
+  }
+  planes[3] = {T.normal, T.normal.dot(T.P[0]) - ramp - margin};
+  planes[4] = {-T.normal, -T.normal.dot(T.P[0]) - ramp - margin};
+
+  // Bounding box of the prism: each vertex's line of sight between the caps.
+  Vector3d lo = Vector3d::Constant(INFINITY), hi = Vector3d::Constant(-INFINITY);
+  for (int k = 0; k < 3; ++k) {
+    const Vector3d dir = sensor.ray_direction(T.P[k]);
+    const double c = std::max(std::abs(T.normal.dot(dir)), options.min_cosine);
+    for (double s : {-1.0, 1.0}) {
+      const Vector3d X = T.P[k] + dir * (s * ramp / c);
+      lo = lo.cwiseMin(X);
+      hi = hi.cwiseMax(X);
+    }
+  }
+  const std::int64_t n_cells = std::int64_t{1} << level;
+  auto index_range = [&](int axis_id, double a, double b, std::int64_t* i0, std::int64_t* i1) {
+    *i0 = std::max<std::int64_t>(0, std::int64_t(std::ceil((a - margin - root.min[axis_id]) / h)));
+    *i1 = std::min<std::int64_t>(n_cells, std::int64_t(std::floor((b + margin - root.min[axis_id]) / h)));
+  };
+  // March along the axis most aligned with the normal: the caps then cut each column shortest.
+  int ax = 0;
+  T.normal.cwiseAbs().maxCoeff(&ax);
+  const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
+  std::int64_t b0, b1, c0, c1, a0, a1;
+  index_range(bx, lo[bx], hi[bx], &b0, &b1);
+  index_range(cx, lo[cx], hi[cx], &c0, &c1);
+  index_range(ax, lo[ax], hi[ax], &a0, &a1);
+  if (b0 > b1 || c0 > c1 || a0 > a1) return;
+
+  const bool has_conf = !frame.confidence.empty();
+  const bool has_colour = !frame.colour.empty();
+  Vector3d X;
+  for (std::int64_t ib = b0; ib <= b1; ++ib) {
+    for (std::int64_t ic = c0; ic <= c1; ++ic) {
+      // Column X(t) = base + t * e_ax; clip t against the prism.
+      Vector3d base;
+      base[ax] = root.min[ax];
+      base[bx] = root.min[bx] + h * double(ib);
+      base[cx] = root.min[cx] + h * double(ic);
+      double tmin = double(a0) * h, tmax = double(a1) * h;
+      bool empty = false;
+      for (const HalfSpace& hs : planes) {
+        const double v = hs.m.dot(base) - hs.k, ma = hs.m[ax];
+        if (ma == 0) {
+          if (v < 0) { empty = true; break; }
+        } else if (ma > 0) {
+          tmin = std::max(tmin, -v / ma);
+        } else {
+          tmax = std::min(tmax, -v / ma);
+        }
+      }
+      if (empty || tmin > tmax) continue;
+      const std::int64_t i0 = std::max<std::int64_t>(a0, std::int64_t(std::ceil(tmin / h)));
+      const std::int64_t i1 = std::min<std::int64_t>(a1, std::int64_t(std::floor(tmax / h)));
+      for (std::int64_t ia = i0; ia <= i1; ++ia) {
+        X = base;
+        X[ax] += h * double(ia);
+        Vector2d q;
+        if (!sensor.project(X, &q)) continue;
+        double bary[3];
+        if (!T.owns(q, bary)) continue;
+        const Vector3d dir = sensor.ray_direction(X);
+        const double cosine = T.normal.dot(dir);  // < 0: the normal faces the sensor
+        if (!(-cosine >= options.min_cosine)) continue;
+        const double distance = T.normal.dot(T.P[0] - X) / cosine;  // > 0: in front of the surface
+        if (!(std::abs(distance) <= ramp)) continue;
+        double conf = 1.0;
+        if (has_conf)
+          conf = bary[0] * frame.confidence[T.idx[0]] + bary[1] * frame.confidence[T.idx[1]] +
+                 bary[2] * frame.confidence[T.idx[2]];
+        const double weight = -cosine * tent_weight(distance, ramp) * conf;
+        if (!(weight > 0)) continue;
+        Contribution c;
+        std::int64_t idx[3];
+        idx[ax] = ia;
+        idx[bx] = ib;
+        idx[cx] = ic;
+        c.key = VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
+        c.distance = float(distance);
+        c.weight = float(weight);
+        c.has_colour = has_colour;
+        if (has_colour) {
+          for (int k = 0; k < 3; ++k) {
+            const double v = bary[0] * frame.colour[T.idx[0]][k] + bary[1] * frame.colour[T.idx[1]][k] +
+                             bary[2] * frame.colour[T.idx[2]][k];
+            c.colour[k] = std::uint8_t(std::clamp(std::lround(v), 0l, 255l));
+          }
+        } else {
+          c.colour[0] = c.colour[1] = c.colour[2] = 0;
+        }
+        out.push_back(c);
+      }
+    }
+  }
+}
+
+IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
+                               const RootCube& root, const IntegrateOptions& options, BrickMap& map) {
+  IntegrateStats total;
+  std::mutex stats_mutex;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 2048), [&](const tbb::blocked_range<std::size_t>& r) {
+    IntegrateStats local;
+    std::vector<Contribution> batch;
+    batch.reserve(r.size() * 16);
+    for (std::size_t t = r.begin(); t != r.end(); ++t) {
+      const FrameTriangle& tri = triangles[t];
+      const float footprint =
+          std::min({frame.footprint[tri[0]], frame.footprint[tri[1]], frame.footprint[tri[2]]});
+      if (!(footprint > 0)) continue;
+      const int lt = triangle_level(root.size, options.lambda, footprint, options.max_level);
+      const std::size_t before = batch.size();
+      for (int l = lt; l >= std::max(0, lt - options.coarser_levels); --l)
+        triangle_contributions(frame, tri, l, lt, root, options, batch);
+      ++local.triangles;
+      ++local.triangles_per_level[lt];
+      local.contributions += batch.size() - before;
+      if (batch.size() > (1u << 18)) {
+        map.apply(batch);
+        batch.clear();
+      }
+    }
+    map.apply(batch);
+    std::lock_guard lock(stats_mutex);
+    total.add(local);
+  });
+  return total;
+}
+
+}  // namespace sf

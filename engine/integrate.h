@@ -1,0 +1,52 @@
+#pragma once
+// Section 5: inserting a triangulated depth map into the hierarchical signed distance field.
+//
+// Each triangle goes to the level of equation 1 and `coarser_levels` coarser levels. A voxel of
+// such a level receives the signed distance, along its line of sight, to the triangle that its
+// line of sight hits. Because a triangulated depth map is a height field over the sensor plane,
+// exactly one triangle owns each line of sight: we decide ownership in the sensor plane with edge
+// functions evaluated identically by both triangles sharing an edge, so every voxel gets at most
+// one contribution per depth map. That makes the accumulation order within a depth map irrelevant
+// and the fused field independent of thread timing.
+#include <cstddef>
+#include <vector>
+
+#include "engine/depth_frame.h"
+#include "engine/geometry.h"
+#include "engine/triangulate.h"
+#include "storage/brick_map.h"
+
+namespace sf {
+
+struct IntegrateOptions {
+  double lambda = 1.0;        // sampling rate λ: cell size <= triangle footprint / λ (equation 1)
+  double gamma = 4.0;         // ramp size factor γ: ramp = γ × cell size of the level, metres
+  int coarser_levels = 4;     // insert each triangle into this many coarser levels too (paper: 4)
+  // Coarser-level insertions reach at most this many times the triangle's own ramp (γ × its own
+  // cell size) from the triangle; 0 reproduces the paper (the coarse level's full ramp). Bounds the
+  // phantom surfaces that huge coarse ramps from opposite sides of thin objects create (NOTES.md).
+  double coarse_reach = 4.0;
+  // Triangles whose normal is within acos(min_cosine) of perpendicular to the line of sight carry
+  // almost no weight (angle term) and span long ramps; they are skipped.
+  double min_cosine = 0.05;
+  int max_level = kMaxLevel;  // deepest octree level used
+  void check() const;
+};
+
+struct IntegrateStats {
+  std::size_t triangles = 0;       // triangles inserted
+  std::size_t contributions = 0;   // voxel updates
+  std::size_t triangles_per_level[kMaxLevel + 1] = {};  // by level of equation 1
+  void add(const IntegrateStats& o);
+};
+
+// Integrates one depth map into `map`. Runs parallel (tbb::parallel_for) in the calling arena.
+IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
+                               const RootCube& root, const IntegrateOptions& options, BrickMap& map);
+
+// The contributions one triangle makes at one level (exposed for tests). `level_of_triangle` is
+// the level of equation 1, used to bound coarser-level ramps.
+void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, int level, int level_of_triangle,
+                            const RootCube& root, const IntegrateOptions& options, std::vector<Contribution>& out);
+
+}  // namespace sf

@@ -1,0 +1,125 @@
+#include "engine/parameters.h"
+
+#include <toml++/toml.h>
+
+#include <charconv>
+#include <cmath>
+#include <sstream>
+
+#include "engine/error.h"
+
+namespace sf {
+
+void ParameterSet::add(std::string name, Target target, std::string unit, std::string help) {
+  params_.push_back({std::move(name), std::move(unit), std::move(help), target});
+}
+
+ParameterSet::Parameter* ParameterSet::find(const std::string& name) {
+  for (auto& p : params_)
+    if (p.name == name) return &p;
+  return nullptr;
+}
+
+namespace {
+template <class T>
+bool parse_number(const std::string& s, T* out) {
+  const char* b = s.data();
+  const char* e = s.data() + s.size();
+  auto [ptr, ec] = std::from_chars(b, e, *out);
+  return ec == std::errc() && ptr == e;
+}
+}  // namespace
+
+void ParameterSet::set(const std::string& name, const std::string& value, const std::string& origin) {
+  Parameter* p = find(name);
+  if (!p) throw input_error(origin, "unknown parameter '" + name + "' (see the effective parameters printed by fuse)");
+  auto bad = [&](const char* what) { return input_error(origin, name + " expects " + what + ", got '" + value + "'"); };
+  std::visit(
+      [&](auto* target) {
+        using T = std::remove_pointer_t<decltype(target)>;
+        if constexpr (std::is_same_v<T, double>) {
+          double v;
+          if (!parse_number(value, &v) || !std::isfinite(v)) throw bad("a number");
+          *target = v;
+        } else if constexpr (std::is_same_v<T, int>) {
+          int v;
+          if (!parse_number(value, &v)) throw bad("an integer");
+          *target = v;
+        } else if constexpr (std::is_same_v<T, std::size_t>) {
+          std::size_t v;
+          if (!parse_number(value, &v)) throw bad("a non-negative integer");
+          *target = v;
+        } else if constexpr (std::is_same_v<T, bool>) {
+          if (value == "true" || value == "1" || value == "on") *target = true;
+          else if (value == "false" || value == "0" || value == "off") *target = false;
+          else throw bad("true or false");
+        } else {
+          *target = value;
+        }
+      },
+      p->target);
+}
+
+void ParameterSet::set_assignment(const std::string& assignment) {
+  const auto eq = assignment.find('=');
+  if (eq == std::string::npos || eq == 0) throw input_error("--set", "expected key=value, got '" + assignment + "'");
+  set(assignment.substr(0, eq), assignment.substr(eq + 1), "--set");
+}
+
+void ParameterSet::load_toml(const std::filesystem::path& path) {
+  toml::table root;
+  try {
+    root = toml::parse_file(path.string());
+  } catch (const toml::parse_error& e) {
+    std::ostringstream msg;
+    msg << "line " << e.source().begin.line << ": " << e.description();
+    throw input_error(path.string(), msg.str());
+  }
+  std::function<void(const toml::table&, const std::string&)> walk = [&](const toml::table& t, const std::string& prefix) {
+    for (auto&& [k, node] : t) {
+      const std::string name = prefix.empty() ? std::string(k.str()) : prefix + "." + std::string(k.str());
+      if (const auto* sub = node.as_table()) {
+        walk(*sub, name);
+        continue;
+      }
+      std::string text;
+      if (auto v = node.value<std::string>(); node.is_string()) text = *v;
+      else if (node.is_boolean()) text = *node.value<bool>() ? "true" : "false";
+      else if (node.is_integer()) text = std::to_string(*node.value<std::int64_t>());
+      else if (node.is_floating_point()) {
+        std::ostringstream o;
+        o.precision(17);
+        o << *node.value<double>();
+        text = o.str();
+      } else throw input_error(path.string(), name + " has an unsupported value type");
+      set(name, text, path.string());
+    }
+  };
+  walk(root, "");
+}
+
+std::string ParameterSet::value_text(const Parameter& p) const {
+  return std::visit(
+      [](auto* target) -> std::string {
+        using T = std::remove_pointer_t<decltype(target)>;
+        if constexpr (std::is_same_v<T, std::string>) return "\"" + *target + "\"";
+        else if constexpr (std::is_same_v<T, bool>) return *target ? "true" : "false";
+        else if constexpr (std::is_same_v<T, double>) {
+          std::ostringstream o;
+          o << *target;
+          return o.str();
+        } else return std::to_string(*target);
+      },
+      p.target);
+}
+
+std::string ParameterSet::describe() const {
+  std::ostringstream o;
+  for (const auto& p : params_) {
+    o << p.name << " = " << value_text(p);
+    o << "  # " << (p.unit.empty() ? "" : "[" + p.unit + "] ") << p.help << "\n";
+  }
+  return o.str();
+}
+
+}  // namespace sf

@@ -1,0 +1,43 @@
+#pragma once
+// Section 6: regularizing the hSDF.
+//  1. Coarse to fine: a voxel with weight w < tau0 is blended with the coarser level's field
+//     interpolated at its position (equations 4-5), if every coarser voxel the interpolation needs
+//     (1, 2, 4 or 8, by the parity of its coordinates) exists. The coarser level has already been
+//     regularized and pruned. A voxel whose (blended) weight stays below tau1 is deleted.
+//  2. Fine to coarse: at every position only the finest surviving voxel is kept.
+#include <cstddef>
+
+#include "engine/progress.h"
+#include "storage/brick_map.h"
+#include "storage/voxel_key.h"
+
+namespace sf {
+
+struct RegularizeOptions {
+  double tau0 = 0.5;  // saturation threshold τ0 (weight units); 0 disables blending
+  double tau1 = 0.1;  // confidence threshold τ1 <= τ0: weaker voxels are deleted
+  void check() const;
+};
+
+struct RegularizeStats {
+  std::size_t blended = 0;            // voxels updated by equations 4-5
+  std::size_t deleted_unconfident = 0;
+  std::size_t deleted_duplicates = 0; // coarser voxels coinciding with a finer one
+  std::size_t voxels_before[kMaxLevel + 1] = {};
+  std::size_t voxels_after[kMaxLevel + 1] = {};
+};
+
+// Regularizes `map` in place (erased voxels are compacted away). Parallel in the calling arena;
+// deterministic.
+RegularizeStats regularize(BrickMap& map, const RegularizeOptions& options, const ProgressFn& progress);
+
+// Interpolates (distance, weight, colour) of the coarser level at voxel `key`'s position; false if a
+// required coarser voxel is missing. Exposed for tests.
+struct CoarseSample {
+  double distance = 0, weight = 0;
+  double colour[3] = {0, 0, 0};
+  double colour_weight = 0;
+};
+bool interpolate_coarser(const BrickMap& map, VoxelKey key, CoarseSample* out);
+
+}  // namespace sf

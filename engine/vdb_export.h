@@ -1,0 +1,19 @@
+#pragma once
+// Exports the fused field as OpenVDB grids for Houdini/Blender users: per octree level l, a float
+// grid "distance_Lnn" (signed distance, metres, positive in front of the surface) and a float grid
+// "weight_Lnn" (confidence), with a linear transform so that index (i,j,k) of level l sits at
+// root.min + cell_size(l) * (i,j,k) in world metres.
+#include <filesystem>
+
+#include "engine/geometry.h"
+#include "storage/brick_map.h"
+
+namespace sf {
+
+// Call once per process before any OpenVDB use (cli/ does).
+void initialize_vdb();
+
+// Writes to a temporary file beside `path`, then renames it into place.
+void export_vdb(const std::filesystem::path& path, const BrickMap& map, const RootCube& root);
+
+}  // namespace sf

@@ -1,0 +1,121 @@
+#include "storage/brick_map.h"
+
+#include <algorithm>
+
+namespace sf {
+
+BrickCoord brick_of(VoxelKey key, int brick_level) {
+  const int l = key.level();
+  const std::uint32_t last = (1u << brick_level) - 1;
+  auto axis = [&](std::uint32_t c) -> std::uint32_t {
+    const std::uint64_t b = l >= brick_level ? (c >> (l - brick_level)) : (std::uint64_t(c) << (brick_level - l));
+    return std::uint32_t(std::min<std::uint64_t>(b, last));
+  };
+  return BrickCoord{axis(key.x()), axis(key.y()), axis(key.z())};
+}
+
+BrickMap::BrickMap(int brick_level) : brick_level_(brick_level) {}
+
+std::size_t BrickMap::brick_count() const {
+  std::shared_lock lock(bricks_mutex_);
+  return bricks_.size();
+}
+
+std::size_t BrickMap::voxel_count() const {
+  std::size_t n = 0;
+  for (Brick* b : bricks()) b->voxels.for_each([&](VoxelKey, const VoxelData&) { ++n; });
+  return n;
+}
+
+std::size_t BrickMap::memory_bytes() const {
+  std::size_t n = 0;
+  for (Brick* b : bricks()) n += sizeof(Brick) + b->voxels.memory_bytes();
+  return n;
+}
+
+Brick& BrickMap::brick(BrickCoord c) {
+  const std::uint64_t id = c.packed();
+  {
+    std::shared_lock lock(bricks_mutex_);
+    auto it = bricks_.find(id);
+    if (it != bricks_.end()) return *it->second;
+  }
+  std::unique_lock lock(bricks_mutex_);
+  auto& slot = bricks_[id];
+  if (!slot) {
+    slot = std::make_unique<Brick>();
+    slot->coord = c;
+  }
+  return *slot;
+}
+
+const Brick* BrickMap::find_brick(BrickCoord c) const {
+  std::shared_lock lock(bricks_mutex_);
+  auto it = bricks_.find(c.packed());
+  return it == bricks_.end() ? nullptr : it->second.get();
+}
+
+void BrickMap::apply(std::vector<Contribution>& batch) {
+  if (batch.empty()) return;
+  // Group by brick so each brick's lock is taken once per batch.
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> order(batch.size());
+  for (std::size_t i = 0; i < batch.size(); ++i) order[i] = {brick_of(batch[i].key, brick_level_).packed(), std::uint32_t(i)};
+  std::sort(order.begin(), order.end());
+  std::size_t i = 0;
+  while (i < order.size()) {
+    const std::uint64_t id = order[i].first;
+    Brick& b = brick(brick_of(batch[order[i].second].key, brick_level_));
+    std::lock_guard lock(b.mutex);
+    for (; i < order.size() && order[i].first == id; ++i) {
+      const Contribution& c = batch[order[i].second];
+      VoxelData& v = b.voxels.find_or_insert(c.key);
+      // Equations 2-3 (Curless & Levoy): running weighted means.
+      const float W = v.weight + c.weight;
+      v.distance = (v.weight * v.distance + c.weight * c.distance) / W;
+      v.weight = W;
+      if (c.has_colour) {
+        const float Wc = v.colour_weight + c.weight;
+        for (int k = 0; k < 3; ++k) v.colour[k] = (v.colour_weight * v.colour[k] + c.weight * float(c.colour[k])) / Wc;
+        v.colour_weight = Wc;
+      }
+    }
+  }
+}
+
+const VoxelData* BrickMap::find(VoxelKey key) const {
+  const Brick* b = find_brick(brick_of(key, brick_level_));
+  if (!b) return nullptr;
+  const VoxelData* v = b->voxels.find(key);
+  return (v && !v->erased()) ? v : nullptr;
+}
+
+VoxelData* BrickMap::find(VoxelKey key) {
+  return const_cast<VoxelData*>(static_cast<const BrickMap*>(this)->find(key));
+}
+
+std::vector<Brick*> BrickMap::bricks() const {
+  std::shared_lock lock(bricks_mutex_);
+  std::vector<Brick*> out;
+  out.reserve(bricks_.size());
+  for (auto& [id, b] : bricks_) out.push_back(b.get());
+  std::sort(out.begin(), out.end(), [](Brick* a, Brick* b) { return a->coord.packed() < b->coord.packed(); });
+  return out;
+}
+
+void BrickMap::clear() {
+  std::unique_lock lock(bricks_mutex_);
+  bricks_.clear();
+}
+
+void BrickMap::compact() {
+  std::unique_lock lock(bricks_mutex_);
+  for (auto it = bricks_.begin(); it != bricks_.end();) {
+    it->second->voxels.compact();
+    if (it->second->voxels.size() == 0)
+      it = bricks_.erase(it);
+    else
+      ++it;
+  }
+}
+
+}  // namespace sf

@@ -1,0 +1,73 @@
+// Sections 5-6 formulas against numbers worked out by hand.
+#include "engine/hsdf_math.h"
+
+#include <gtest/gtest.h>
+
+#include "engine/triangulate.h"
+
+namespace sf {
+
+TEST(Equation1, LevelIsCeilOfLog2OfRootOverFootprint) {
+  // Root 10 m, footprint 1 cm, λ = 1: log2(1000) = 9.97 -> level 10 (cell 9.77 mm <= 10 mm).
+  EXPECT_EQ(triangle_level(10.0, 1.0, 0.01, 18), 10);
+  EXPECT_LE(10.0 / 1024, 0.01);
+  EXPECT_GT(10.0 / 512, 0.01);
+  // Exactly a power of two: 8 m / 1 cm... 8 / 0.0625 = 128 = 2^7 -> level 7, cell == footprint.
+  EXPECT_EQ(triangle_level(8.0, 1.0, 0.0625, 18), 7);
+  // λ = 2 halves the allowed cell: one level deeper.
+  EXPECT_EQ(triangle_level(8.0, 2.0, 0.0625, 18), 8);
+  // Footprint larger than the root: level 0; tiny footprint: clamped to the deepest level.
+  EXPECT_EQ(triangle_level(1.0, 1.0, 5.0, 18), 0);
+  EXPECT_EQ(triangle_level(1.0, 1.0, 1e-9, 18), 18);
+}
+
+TEST(Ramp, GammaTimesCellSize) {
+  EXPECT_DOUBLE_EQ(ramp_length(8.0, 0.005), 0.04);
+  EXPECT_DOUBLE_EQ(ramp_length(2.0, 0.25), 0.5);
+}
+
+TEST(TentWeight, LinearToZeroAtTheRampEnds) {
+  EXPECT_DOUBLE_EQ(tent_weight(0.0, 0.04), 1.0);
+  EXPECT_DOUBLE_EQ(tent_weight(0.01, 0.04), 0.75);
+  EXPECT_DOUBLE_EQ(tent_weight(-0.03, 0.04), 0.25);
+  EXPECT_DOUBLE_EQ(tent_weight(0.04, 0.04), 0.0);
+  EXPECT_DOUBLE_EQ(tent_weight(-0.05, 0.04), 0.0);
+}
+
+TEST(Equations2And3, RunningWeightedMean) {
+  // (D, W) = (0.2, 1) plus (d, w) = (-0.1, 2): W = 3, D = (0.2 - 0.2) / 3 = 0.
+  DistanceWeight v = accumulate({0.2, 1.0}, {-0.1, 2.0});
+  EXPECT_DOUBLE_EQ(v.weight, 3.0);
+  EXPECT_NEAR(v.distance, 0.0, 1e-15);
+  // then (0.3, 1): W = 4, D = 0.3 / 4 = 0.075
+  v = accumulate(v, {0.3, 1.0});
+  EXPECT_DOUBLE_EQ(v.weight, 4.0);
+  EXPECT_DOUBLE_EQ(v.distance, 0.075);
+}
+
+TEST(Equations4And5, BlendWithSaturatedCoarseWeight) {
+  // τ0 = 0.5, fine (d, w) = (0.1, 0.2), coarse (0.3, 2.0): min(1, 2/0.5) = 1, k = 0.3,
+  // w~ = 0.5, d~ = (0.1*0.2 + 0.3*0.3) / 0.5 = 0.22.
+  DistanceWeight b = regularize_blend({0.1, 0.2}, {0.3, 2.0}, 0.5);
+  EXPECT_DOUBLE_EQ(b.weight, 0.5);
+  EXPECT_NEAR(b.distance, 0.22, 1e-15);
+  // Coarse weight 0.25 (< τ0): min(1, 0.5) = 0.5, k = 0.3 * 0.5 = 0.15, w~ = 0.35,
+  // d~ = (0.02 + 0.045) / 0.35 = 0.185714...
+  b = regularize_blend({0.1, 0.2}, {0.3, 0.25}, 0.5);
+  EXPECT_DOUBLE_EQ(b.weight, 0.35);
+  EXPECT_NEAR(b.distance, 0.065 / 0.35, 1e-15);
+  // An empty fine voxel (w = 0) takes the coarse distance.
+  b = regularize_blend({0.0, 0.0}, {0.3, 1.0}, 0.5);
+  EXPECT_DOUBLE_EQ(b.distance, 0.3);
+  EXPECT_DOUBLE_EQ(b.weight, 0.5);
+}
+
+TEST(Discontinuity, ThresholdIsRhoTimesNearerFootprint) {
+  // Nearer sample at z = 2 with F = 2 mm: with ρ = 5 the gap may be up to 10 mm.
+  EXPECT_FALSE(is_discontinuity(2.0f, 2.0099f, 0.002f, 0.004f, 5.0));
+  EXPECT_TRUE(is_discontinuity(2.0f, 2.0101f, 0.002f, 0.004f, 5.0));
+  // The nearer one's footprint counts, whichever order the samples come in.
+  EXPECT_TRUE(is_discontinuity(2.0101f, 2.0f, 0.004f, 0.002f, 5.0));
+}
+
+}  // namespace sf

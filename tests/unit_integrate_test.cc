@@ -1,0 +1,197 @@
+// Section 5: pixel footprints, triangulation and insertion into the hSDF on a plane seen by a
+// pinhole camera, with distances and weights worked out by hand.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "engine/depth_frame.h"
+#include "engine/hsdf_math.h"
+#include "engine/integrate.h"
+#include "engine/triangulate.h"
+#include "storage/brick_map.h"
+
+namespace sf {
+namespace {
+
+// Camera at the origin looking down +z, f = 100 px, 20x20 pixels, principal point at the centre.
+DepthFrame plane_frame(double z, int size = 20) {
+  DepthFrame f;
+  f.name = "plane";
+  f.width = f.height = size;
+  f.sensor.fx = f.sensor.fy = 100;
+  f.sensor.cx = f.sensor.cy = size / 2.0;
+  std::vector<float> depth(f.size(), float(z));
+  fill_perspective_samples(f, depth, false);
+  return f;
+}
+
+RootCube test_root() { return RootCube{Eigen::Vector3d(-1, -1, 1), 2.56}; }
+
+}  // namespace
+
+TEST(Footprint, DepthOverFocalLength) {
+  const DepthFrame f = plane_frame(2.0);
+  // F = z / f = 2 / 100 = 2 cm for every pixel.
+  EXPECT_FLOAT_EQ(f.footprint[0], 0.02f);
+  // Pixel (col 10, row 10) has centre (10.5, 10.5): x = 0.5 / 100 * 2 = 0.01.
+  const auto& p = f.position[10 * 20 + 10];
+  EXPECT_FLOAT_EQ(p.x(), 0.01f);
+  EXPECT_FLOAT_EQ(p.y(), 0.01f);
+  EXPECT_FLOAT_EQ(p.z(), 2.0f);
+}
+
+TEST(Footprint, RayDistanceDepthIsConvertedToZ) {
+  DepthFrame f;
+  f.width = f.height = 2;
+  f.sensor.fx = f.sensor.fy = 1;
+  f.sensor.cx = f.sensor.cy = 0.5;
+  // Pixel (1,1) has centre (1.5,1.5): ray (1,1,1), length sqrt(3). Ray distance 2*sqrt(3) -> z = 2.
+  std::vector<float> depth(4, float(2 * std::sqrt(3.0)));
+  fill_perspective_samples(f, depth, true);
+  EXPECT_NEAR(f.position[3].z(), 2.0, 1e-6);
+  EXPECT_NEAR(f.footprint[3], 2.0, 1e-6);
+  // Pixel (0,0) has centre (0.5,0.5) = the principal point: its ray is the axis, z = depth.
+  EXPECT_NEAR(f.position[0].z(), 2 * std::sqrt(3.0), 1e-5);
+  // Pixel (1,0): ray (1,0,1), length sqrt(2): z = 2 sqrt(3) / sqrt(2).
+  EXPECT_NEAR(f.position[1].z(), 2 * std::sqrt(3.0) / std::sqrt(2.0), 1e-5);
+}
+
+TEST(Triangulate, TwoTrianglesPerQuadAndDiscontinuitiesDropped) {
+  DepthFrame f = plane_frame(2.0, 4);
+  EXPECT_EQ(triangulate(f, {}).size(), 2u * 3 * 3);
+  // Raise one corner sample by 20 cm (> 5 x 2 cm): the triangles using it go.
+  std::vector<float> depth(16, 2.0f);
+  depth[0] = 2.2f;
+  fill_perspective_samples(f, depth, false);
+  EXPECT_EQ(triangulate(f, {}).size(), 2u * 3 * 3 - 1);  // the quad splits away from sample 0
+  // An interior sample lies in four quads; each quad splits along the diagonal that avoids it,
+  // so one triangle per quad touches it.
+  depth[5] = 2.2f;
+  depth[0] = 2.0f;
+  fill_perspective_samples(f, depth, false);
+  EXPECT_EQ(triangulate(f, {}).size(), 2u * 3 * 3 - 4);
+  // An invalid sample removes the triangles touching it, keeping one of its quad's pair.
+  depth.assign(16, 2.0f);
+  depth[0] = 0.0f;
+  fill_perspective_samples(f, depth, false);
+  EXPECT_EQ(triangulate(f, {}).size(), 2u * 3 * 3 - 1);
+}
+
+TEST(Integrate, DistancesAndWeightsOnAPlane) {
+  const DepthFrame f = plane_frame(2.0);
+  const RootCube root = test_root();
+  IntegrateOptions opt;
+  opt.gamma = 4;
+  // Equation 1: ceil(log2(2.56 / 0.02)) = 7, cell 2 cm, ramp 8 cm.
+  ASSERT_EQ(triangle_level(root.size, 1.0, 0.02, kMaxLevel), 7);
+  BrickMap map(2);
+  const auto tris = triangulate(f, {});
+  const IntegrateStats st = integrate_frame(f, tris, root, opt, map);
+  EXPECT_EQ(st.triangles, tris.size());
+  EXPECT_EQ(st.triangles_per_level[7], tris.size());
+  // Voxel (50, 50, 48) of level 7 sits at (0, 0, 1.96): 4 cm in front, weight cos 0 x tent = 0.5.
+  const VoxelData* v = map.find(VoxelKey::make(7, 50, 50, 48));
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->distance, 0.04, 1e-6);
+  EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  v = map.find(VoxelKey::make(7, 50, 50, 52));  // z = 2.04, behind
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->distance, -0.04, 1e-6);
+  EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  // Off axis: (55, 50, 48) at X = (0.1, 0, 1.96). The ray hits z = 2 at 2/1.96 of |X|:
+  // distance |X| * 0.04 / 1.96, cosine 1.96 / |X|.
+  v = map.find(VoxelKey::make(7, 55, 50, 48));
+  ASSERT_NE(v, nullptr);
+  const double len = std::hypot(0.1, 1.96);
+  const double d = len * 0.04 / 1.96;
+  EXPECT_NEAR(v->distance, d, 1e-6);
+  EXPECT_NEAR(v->weight, (1.96 / len) * (1 - d / 0.08), 1e-6);
+  // Beyond the ramp nothing is created: z = 1.90 is 10 cm in front.
+  EXPECT_EQ(map.find(VoxelKey::make(7, 50, 50, 45)), nullptr);
+  // Outside the image nothing is created: x = 0.8 projects to u = 50.
+  EXPECT_EQ(map.find(VoxelKey::make(7, 90, 50, 50)), nullptr);
+  // Coarser levels got the plane too: level 6 voxel (25, 25, 23) at z = 1.92, ramp 16 cm:
+  // distance 8 cm, weight 0.5.
+  v = map.find(VoxelKey::make(6, 25, 25, 23));
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->distance, 0.08, 1e-6);
+  EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  // Level 2 (4 levels up from 7): present; level 1 not.
+  bool level2 = false, level1 = false;
+  for (Brick* b : map.bricks())
+    b->voxels.for_each([&](VoxelKey k, const VoxelData&) {
+      level2 |= k.level() == 3;
+      level1 |= k.level() == 2;
+    });
+  EXPECT_TRUE(level2);
+  EXPECT_FALSE(level1);
+}
+
+TEST(Integrate, EachVoxelGetsAtMostOneContributionPerDepthMap) {
+  // A tilted, curved surface so triangles meet at arbitrary angles.
+  DepthFrame f;
+  f.width = f.height = 30;
+  f.sensor.fx = f.sensor.fy = 60;
+  f.sensor.cx = f.sensor.cy = 15;
+  std::vector<float> depth(f.size());
+  for (int r = 0; r < 30; ++r)
+    for (int c = 0; c < 30; ++c) depth[r * 30 + c] = float(2.0 + 0.01 * c + 0.0005 * (r - 15) * (r - 15));
+  fill_perspective_samples(f, depth, false);
+  const auto tris = triangulate(f, {});
+  const RootCube root = test_root();
+  IntegrateOptions opt;
+  for (int level : {5, 6, 7}) {
+    std::vector<Contribution> out;
+    for (const auto& t : tris) triangle_contributions(f, t, level, 7, root, opt, out);
+    std::set<std::uint64_t> keys;
+    for (const auto& c : out) keys.insert(c.key.bits);
+    EXPECT_EQ(keys.size(), out.size()) << "level " << level;
+    EXPECT_GT(out.size(), 50u);
+  }
+}
+
+TEST(Integrate, SameDepthMapTwiceDoublesWeightsAndKeepsDistances) {
+  const DepthFrame f = plane_frame(2.0);
+  const auto tris = triangulate(f, {});
+  BrickMap once(2), twice(2);
+  integrate_frame(f, tris, test_root(), {}, once);
+  integrate_frame(f, tris, test_root(), {}, twice);
+  integrate_frame(f, tris, test_root(), {}, twice);
+  EXPECT_EQ(once.voxel_count(), twice.voxel_count());
+  for (Brick* b : once.bricks())
+    b->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+      const VoxelData* w = twice.find(k);
+      ASSERT_NE(w, nullptr);
+      EXPECT_FLOAT_EQ(w->weight, 2 * v.weight);
+      EXPECT_NEAR(w->distance, v.distance, 1e-7);
+    });
+}
+
+TEST(Integrate, OrthographicSensorLooksAlongItsAxis) {
+  // A range grid: samples on the plane z = 0.5 of the sensor frame, 1 cm apart, sensor axis +z.
+  DepthFrame f;
+  f.width = f.height = 10;
+  f.sensor.kind = Sensor::Kind::Orthographic;
+  f.valid.assign(100, 1);
+  for (int r = 0; r < 10; ++r)
+    for (int c = 0; c < 10; ++c) {
+      f.position.push_back(Eigen::Vector3f(0.01f * c, 0.01f * r, 0.5f));
+      f.image_pos.push_back(Eigen::Vector2f(0.01f * c, 0.01f * r));
+      f.footprint.push_back(0.01f);
+    }
+  const RootCube root{Eigen::Vector3d(0, 0, 0), 1.28};  // level 7: cell 1 cm
+  BrickMap map(1);
+  IntegrateOptions opt;
+  opt.coarser_levels = 0;
+  integrate_frame(f, triangulate(f, {}), root, opt, map);
+  // Voxel (5, 5, 48) at z = 0.48: 2 cm in front along +z, cosine 1, ramp 4 cm -> weight 0.5.
+  const VoxelData* v = map.find(VoxelKey::make(7, 5, 5, 48));
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->distance, 0.02, 1e-6);
+  EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  EXPECT_EQ(map.find(VoxelKey::make(6, 2, 2, 24)), nullptr);  // no coarser insertion asked
+}
+
+}  // namespace sf

@@ -1,0 +1,92 @@
+// Section 6 on hand-built fields.
+#include "engine/regularize.h"
+
+#include <gtest/gtest.h>
+
+namespace sf {
+namespace {
+void put(BrickMap& m, VoxelKey k, float d, float w) {
+  std::vector<Contribution> c{{k, d, w, {0, 0, 0}, false}};
+  m.apply(c);
+}
+}  // namespace
+
+TEST(Regularize, InterpolatesFromOneTwoFourOrEightCoarserVoxels) {
+  BrickMap m(1);
+  for (std::uint32_t z = 0; z < 2; ++z)
+    for (std::uint32_t y = 0; y < 2; ++y)
+      for (std::uint32_t x = 0; x < 2; ++x) put(m, VoxelKey::make(1, x, y, z), float(x + 2 * y + 4 * z), 1.0f);
+  CoarseSample s;
+  ASSERT_TRUE(interpolate_coarser(m, VoxelKey::make(2, 2, 0, 0), &s));  // coincides with (1,0,0)
+  EXPECT_DOUBLE_EQ(s.distance, 1.0);
+  ASSERT_TRUE(interpolate_coarser(m, VoxelKey::make(2, 1, 0, 0), &s));  // between 2
+  EXPECT_DOUBLE_EQ(s.distance, 0.5);
+  ASSERT_TRUE(interpolate_coarser(m, VoxelKey::make(2, 1, 1, 0), &s));  // between 4
+  EXPECT_DOUBLE_EQ(s.distance, 1.5);
+  ASSERT_TRUE(interpolate_coarser(m, VoxelKey::make(2, 1, 1, 1), &s));  // between 8
+  EXPECT_DOUBLE_EQ(s.distance, 3.5);
+  EXPECT_DOUBLE_EQ(s.weight, 1.0);
+  EXPECT_FALSE(interpolate_coarser(m, VoxelKey::make(2, 3, 0, 0), &s));  // (1,0,0)-(2,0,0): missing
+  EXPECT_FALSE(interpolate_coarser(m, VoxelKey::make(0, 0, 0, 0), &s));  // level 0 has no coarser
+}
+
+TEST(Regularize, BlendsDeletesAndRemovesDuplicates) {
+  BrickMap m(1);
+  put(m, VoxelKey::make(1, 0, 0, 0), 0.3f, 1.0f);
+  put(m, VoxelKey::make(1, 1, 0, 0), 0.1f, 1.0f);
+  put(m, VoxelKey::make(2, 1, 0, 0), 0.0f, 0.2f);   // between the two: coarse (0.2, 1)
+  put(m, VoxelKey::make(2, 3, 0, 0), 0.05f, 0.05f); // coarse (2,0,0) missing, w < τ1: deleted
+  put(m, VoxelKey::make(2, 5, 0, 0), 0.05f, 0.3f);  // missing coarse, τ1 <= w < τ0: kept as is
+  put(m, VoxelKey::make(2, 2, 0, 0), -0.1f, 0.8f);  // confident, coincides with (1,1,0,0)
+  RegularizeOptions opt;  // τ0 = 0.5, τ1 = 0.1
+  const RegularizeStats st = regularize(m, opt, {});
+  // Equations 4-5: k = (0.5 - 0.2) * min(1, 1/0.5) = 0.3, w = 0.5, d = (0 + 0.2 * 0.3) / 0.5 = 0.12.
+  const VoxelData* v = m.find(VoxelKey::make(2, 1, 0, 0));
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  EXPECT_NEAR(v->distance, 0.12, 1e-6);
+  EXPECT_EQ(m.find(VoxelKey::make(2, 3, 0, 0)), nullptr);
+  v = m.find(VoxelKey::make(2, 5, 0, 0));
+  ASSERT_NE(v, nullptr);
+  EXPECT_FLOAT_EQ(v->weight, 0.3f);
+  EXPECT_FLOAT_EQ(v->distance, 0.05f);
+  // (1,1,0,0) coincides with (2,2,0,0): the coarser one goes; (1,0,0,0) has no finer twin: stays.
+  EXPECT_EQ(m.find(VoxelKey::make(1, 1, 0, 0)), nullptr);
+  EXPECT_NE(m.find(VoxelKey::make(1, 0, 0, 0)), nullptr);
+  EXPECT_EQ(st.blended, 1u);
+  EXPECT_EQ(st.deleted_unconfident, 1u);
+  EXPECT_EQ(st.deleted_duplicates, 1u);
+  EXPECT_EQ(st.voxels_after[1] + st.voxels_after[2], 4u);
+}
+
+TEST(Regularize, DuplicatesAcrossSeveralLevelsKeepTheFinest) {
+  BrickMap m(0);
+  put(m, VoxelKey::make(0, 1, 1, 1), 0.1f, 1.0f);
+  put(m, VoxelKey::make(3, 8, 8, 8), 0.2f, 1.0f);  // same point, three levels finer, level 1-2 empty
+  regularize(m, {0.0, 0.0}, {});
+  EXPECT_EQ(m.find(VoxelKey::make(0, 1, 1, 1)), nullptr);
+  EXPECT_NE(m.find(VoxelKey::make(3, 8, 8, 8)), nullptr);
+}
+
+TEST(BrickMap, BrickOfVoxelsOfAllLevels) {
+  // Brick level 2: 4 bricks per axis.
+  EXPECT_EQ(brick_of(VoxelKey::make(4, 15, 0, 8), 2).x, 3u);
+  EXPECT_EQ(brick_of(VoxelKey::make(4, 16, 0, 8), 2).x, 3u);  // upper root face -> last brick
+  EXPECT_EQ(brick_of(VoxelKey::make(4, 4, 0, 8), 2).x, 1u);
+  EXPECT_EQ(brick_of(VoxelKey::make(4, 4, 0, 8), 2).z, 2u);
+  EXPECT_EQ(brick_of(VoxelKey::make(1, 1, 0, 0), 2).x, 2u);   // coarse voxel at the middle
+}
+
+TEST(VoxelTable, GrowsFindsAndCompacts) {
+  VoxelTable t;
+  for (std::uint32_t i = 0; i < 1000; ++i) t.find_or_insert(VoxelKey::make(10, i, i % 7, 3)).weight = float(i + 1);
+  EXPECT_EQ(t.size(), 1000u);
+  for (std::uint32_t i = 0; i < 1000; i += 2) t.find(VoxelKey::make(10, i, i % 7, 3))->weight = -1;
+  t.compact();
+  EXPECT_EQ(t.size(), 500u);
+  EXPECT_EQ(t.find(VoxelKey::make(10, 2, 2, 3)), nullptr);
+  ASSERT_NE(t.find(VoxelKey::make(10, 3, 3, 3)), nullptr);
+  EXPECT_FLOAT_EQ(t.find(VoxelKey::make(10, 3, 3, 3))->weight, 4.0f);
+}
+
+}  // namespace sf
