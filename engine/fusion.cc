@@ -45,6 +45,8 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
         "coarser-level ramps reach at most this many own ramps; 0 = paper (unbounded)");
   s.add("integrate.min_cosine", &o.integrate.min_cosine, "", "skip triangles seen more grazing than this");
   s.add("integrate.max_level", &o.integrate.max_level, "level", "deepest octree level");
+  s.add("integrate.single_level", &o.integrate.single_level, "level",
+        "-1 = off; else a single-level VRIP baseline inserting every triangle at this level only");
   s.add("regularize.tau0", &o.regularize.tau0, "weight", "saturation threshold τ0 (0: no blending)");
   s.add("regularize.tau1", &o.regularize.tau1, "weight", "confidence threshold τ1 (weaker voxels are deleted)");
   s.add("extract.neighbourhood_n", &o.extract.neighbourhood_n, "voxels", "n of the neighbourhood rule (7.1)");

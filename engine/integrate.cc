@@ -21,6 +21,8 @@ void IntegrateOptions::check() const {
   if (!(min_cosine >= 0 && min_cosine < 1)) throw InputError("integrate.min_cosine must be in [0, 1)");
   if (max_level < 0 || max_level > kMaxLevel)
     throw InputError("integrate.max_level must be in 0.." + std::to_string(kMaxLevel));
+  if (single_level < -1 || single_level > kMaxLevel)
+    throw InputError("integrate.single_level must be -1 (off) or in 0.." + std::to_string(kMaxLevel));
 }
 
 void IntegrateStats::add(const IntegrateStats& o) {
@@ -235,10 +237,11 @@ IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameT
       const float footprint =
           std::min({frame.footprint[tri[0]], frame.footprint[tri[1]], frame.footprint[tri[2]]});
       if (!(footprint > 0)) continue;
-      const int lt = triangle_level(root.size, options.lambda, footprint, options.max_level);
+      const int lt = options.single_level >= 0 ? options.single_level
+                                               : triangle_level(root.size, options.lambda, footprint, options.max_level);
+      const int coarsest = options.single_level >= 0 ? lt : std::max(0, lt - options.coarser_levels);
       const std::size_t before = batch.size();
-      for (int l = lt; l >= std::max(0, lt - options.coarser_levels); --l)
-        triangle_contributions(frame, tri, l, lt, root, options, batch);
+      for (int l = lt; l >= coarsest; --l) triangle_contributions(frame, tri, l, lt, root, options, batch);
       ++local.triangles;
       ++local.triangles_per_level[lt];
       local.contributions += batch.size() - before;

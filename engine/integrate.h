@@ -30,6 +30,9 @@ struct IntegrateOptions {
   // almost no weight (angle term) and span long ramps; they are skipped.
   double min_cosine = 0.05;
   int max_level = kMaxLevel;  // deepest octree level used
+  // >= 0: a single-level VRIP baseline — every triangle goes to this level only, whatever its
+  // footprint (for comparisons; not the paper's method). -1: off.
+  int single_level = -1;
   void check() const;
 };
 
