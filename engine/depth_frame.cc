@@ -1,6 +1,8 @@
 #include "engine/depth_frame.h"
 
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace sf {
 
@@ -12,6 +14,11 @@ std::size_t DepthFrame::valid_count() const {
 
 void fill_perspective_samples(DepthFrame& frame, const std::vector<float>& depth, bool ray_distance) {
   const std::size_t n = frame.size();
+  // A caller bug, not bad input: readers check map sizes against their headers before this.
+  if (depth.size() != n)
+    throw std::invalid_argument(frame.name + ": fill_perspective_samples given " + std::to_string(depth.size()) +
+                                " depths for a " + std::to_string(frame.width) + "x" + std::to_string(frame.height) +
+                                " frame");
   frame.valid.assign(n, 0);
   frame.position.assign(n, Eigen::Vector3f::Zero());
   frame.image_pos.assign(n, Eigen::Vector2f::Zero());

@@ -72,8 +72,10 @@ struct PngHeader {
 
 // Decodes into `out` (bytes, row-major, tightly packed). Returns "" or an error: "size" and
 // "format" are header problems the caller reports with the numbers in `header`.
-std::string decode_png(const std::vector<std::uint8_t>& file, PngWant want,
-                       std::vector<std::uint8_t>* out, PngHeader* header) {
+// `rows` is scratch owned by the caller, so that no object with a destructor lives only in this
+// frame after the setjmp.
+std::string decode_png(const std::vector<std::uint8_t>& file, PngWant want, std::vector<std::uint8_t>* out,
+                       PngHeader* header, std::vector<png_bytep>* rows) {
   PngReadState state;
   state.data = file.data();
   state.size = file.size();
@@ -84,8 +86,8 @@ std::string decode_png(const std::vector<std::uint8_t>& file, PngWant want,
     png_destroy_read_struct(&png, nullptr, nullptr);
     return "out of memory";
   }
-  // Everything modified after setjmp and used after a longjmp lives outside this frame's
-  // registers: `state` (address taken), `out` and `header` (pointers to the caller's objects).
+  // Everything modified after setjmp and used after a longjmp is reached through a pointer
+  // (`state`, whose address libpng holds, and the caller's `out`, `header`, `rows`).
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_read_struct(&png, &info, nullptr);
     return std::string("corrupt PNG (") + state.message + ")";
@@ -125,9 +127,9 @@ std::string decode_png(const std::vector<std::uint8_t>& file, PngWant want,
     return "unexpected row size after conversion";
   }
   out->resize(rowbytes * header->height);
-  std::vector<png_bytep> rows(header->height);
-  for (png_uint_32 r = 0; r < header->height; ++r) rows[r] = out->data() + r * rowbytes;
-  png_read_image(png, rows.data());
+  rows->resize(header->height);
+  for (png_uint_32 r = 0; r < header->height; ++r) (*rows)[r] = out->data() + r * rowbytes;
+  png_read_image(png, rows->data());
   png_read_end(png, nullptr);
   png_destroy_read_struct(&png, &info, nullptr);
   return "";
@@ -261,7 +263,8 @@ Image8 read_image_rgb(const fs::path& path) {
   image.channels = 3;
   if (is_png(file)) {
     PngHeader h;
-    const std::string err = decode_png(file, PngWant::Rgb8, &image.data, &h);
+    std::vector<png_bytep> rows;
+    const std::string err = decode_png(file, PngWant::Rgb8, &image.data, &h, &rows);
     if (!err.empty()) throw_png_error(path, err, h, file.size(), PngWant::Rgb8);
     image.width = int(h.width);
     image.height = int(h.height);
@@ -284,7 +287,8 @@ Image16 read_png16(const fs::path& path) {
   if (!is_png(file)) throw input_error(path.string(), "not a PNG file");
   PngHeader h;
   std::vector<std::uint8_t> bytes;
-  const std::string err = decode_png(file, PngWant::Grey16, &bytes, &h);
+  std::vector<png_bytep> rows;
+  const std::string err = decode_png(file, PngWant::Grey16, &bytes, &h, &rows);
   if (!err.empty()) throw_png_error(path, err, h, file.size(), PngWant::Grey16);
   Image16 image;
   image.width = int(h.width);

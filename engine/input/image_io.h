@@ -20,7 +20,9 @@ struct Image16 {  // single channel, row-major
 Image8 read_image_rgb(const std::filesystem::path& path);
 // 16-bit single-channel PNG (e.g. depth). Throws InputError naming the file on failure.
 Image16 read_png16(const std::filesystem::path& path);
-// Writers; write to a temporary name then rename.
+// Writers; write to a temporary name then rename, so readers never see a partial file. They throw
+// std::invalid_argument if the image's size and data disagree, std::runtime_error naming the
+// file if it cannot be written.
 void write_png8(const std::filesystem::path& path, const Image8& image);   // channels 1 or 3
 void write_png16(const std::filesystem::path& path, const Image16& image);
 

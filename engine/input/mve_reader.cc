@@ -85,14 +85,19 @@ DepthFrame load_view(const MveView& v, const InputOptions& options) {
 
   const Image8 colour = read_colour(v.dir, options.mve_image);
   if (colour.width > 0) {
-    // A depth map of a coarser level is smaller than the colour image by a power of two, rounded
-    // per level: allow the scale factors in x and y to differ by one depth pixel's worth.
-    const double sx = double(colour.width) / f.width, sy = double(colour.height) / f.height;
-    if (sx < 1 || sy < 1 || std::abs(sx - sy) > sx / f.width + sy / f.height)
+    // A depth map of a coarser level L is the colour image halved L times, MVE-style
+    // (image_tools.h rescale_half_size: n -> (n + 1) / 2).
+    bool same_view = false;
+    for (int w = colour.width, h = colour.height; !same_view && w >= f.width && h >= f.height;
+         w = (w + 1) / 2, h = (h + 1) / 2) {
+      same_view = w == f.width && h == f.height;
+      if (w == 1 && h == 1) break;
+    }
+    if (!same_view)
       throw input_error((v.dir / options.mve_image).string(),
                         "colour image is " + std::to_string(colour.width) + "x" + std::to_string(colour.height) +
                             ", not the depth map's " + std::to_string(f.width) + "x" + std::to_string(f.height) +
-                            " or a larger image of the same shape");
+                            " or that size doubled (MVE levels)");
     f.colour = input_detail::sample_colour(colour, f.width, f.height);
   }
   return f;
