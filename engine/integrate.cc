@@ -128,39 +128,82 @@ void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, i
     m /= mn;
     planes[e] = {m, m.dot(A) - margin};
   }
-  planes[3] = {T.normal, T.normal.dot(T.P[0]) - ramp - margin};
-  planes[4] = {-T.normal, -T.normal.dot(T.P[0]) - ramp - margin};
-
-  // Bounding box of the prism: each vertex's line of sight between the caps.
-  Vector3d lo = Vector3d::Constant(INFINITY), hi = Vector3d::Constant(-INFINITY);
+  // A voxel at ray distance |d| <= ramp from the triangle lies within |n.(X - P0)| <= ramp * |n.dir|.
+  double max_cos = 0;
+  Vector3d corner[6];
   for (int k = 0; k < 3; ++k) {
     const Vector3d dir = sensor.ray_direction(T.P[k]);
-    const double c = std::max(std::abs(T.normal.dot(dir)), options.min_cosine);
-    for (double s : {-1.0, 1.0}) {
-      const Vector3d X = T.P[k] + dir * (s * ramp / c);
-      lo = lo.cwiseMin(X);
-      hi = hi.cwiseMax(X);
-    }
+    max_cos = std::max(max_cos, std::abs(T.normal.dot(dir)));
+    corner[2 * k] = T.P[k] - ramp * dir;
+    corner[2 * k + 1] = T.P[k] + ramp * dir;
   }
+  const double slab = ramp * max_cos + margin;
+  planes[3] = {T.normal, T.normal.dot(T.P[0]) - slab};
+  planes[4] = {-T.normal, -T.normal.dot(T.P[0]) - slab};
+
+  // March along the axis most aligned with the lines of sight: columns then run down the prism's
+  // long side, and few columns miss it.
+  int ax = 0;
+  sensor.ray_direction((T.P[0] + T.P[1] + T.P[2]) / 3.0).cwiseAbs().maxCoeff(&ax);
+  const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
+  // The prism's shadow on the (b, c) plane: the convex hull of the six corners' projections,
+  // grown by the margin (perspective caps bulge by far less than a cell).
+  Eigen::Vector2d hull_pts[6];
+  for (int k = 0; k < 6; ++k) hull_pts[k] = Eigen::Vector2d(corner[k][bx], corner[k][cx]);
+  std::sort(hull_pts, hull_pts + 6, [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  Eigen::Vector2d hull[12];
+  int nh = 0;
+  for (int pass = 0; pass < 2; ++pass) {  // Andrew's monotone chain: lower then upper hull
+    const int start = nh;
+    for (int k = 0; k < 6; ++k) {
+      const Eigen::Vector2d& p = hull_pts[pass == 0 ? k : 5 - k];
+      while (nh >= start + 2 && cross2(hull[nh - 1] - hull[nh - 2], p - hull[nh - 2]) <= 0) --nh;
+      hull[nh++] = p;
+    }
+    --nh;
+  }
+  Vector3d lo = corner[0], hi = corner[0];
+  for (int k = 1; k < 6; ++k) {
+    lo = lo.cwiseMin(corner[k]);
+    hi = hi.cwiseMax(corner[k]);
+  }
+  const double pad = margin + 1e-6 * h;
   const std::int64_t n_cells = std::int64_t{1} << level;
   auto index_range = [&](int axis_id, double a, double b, std::int64_t* i0, std::int64_t* i1) {
-    *i0 = std::max<std::int64_t>(0, std::int64_t(std::ceil((a - margin - root.min[axis_id]) / h)));
-    *i1 = std::min<std::int64_t>(n_cells, std::int64_t(std::floor((b + margin - root.min[axis_id]) / h)));
+    *i0 = std::max<std::int64_t>(0, std::int64_t(std::ceil((a - pad - root.min[axis_id]) / h)));
+    *i1 = std::min<std::int64_t>(n_cells, std::int64_t(std::floor((b + pad - root.min[axis_id]) / h)));
   };
-  // March along the axis most aligned with the normal: the caps then cut each column shortest.
-  int ax = 0;
-  T.normal.cwiseAbs().maxCoeff(&ax);
-  const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
-  std::int64_t b0, b1, c0, c1, a0, a1;
+  std::int64_t b0, b1, a0, a1;
   index_range(bx, lo[bx], hi[bx], &b0, &b1);
-  index_range(cx, lo[cx], hi[cx], &c0, &c1);
   index_range(ax, lo[ax], hi[ax], &a0, &a1);
-  if (b0 > b1 || c0 > c1 || a0 > a1) return;
-
+  if (b0 > b1 || a0 > a1) return;
   const bool has_conf = !frame.confidence.empty();
   const bool has_colour = !frame.colour.empty();
   Vector3d X;
   for (std::int64_t ib = b0; ib <= b1; ++ib) {
+    // The hull's extent in c along this row.
+    const double yb = root.min[bx] + h * double(ib);
+    double cmin = INFINITY, cmax = -INFINITY;
+    for (int e = 0; e < nh; ++e) {
+      const Eigen::Vector2d& p = hull[e];
+      const Eigen::Vector2d& q = hull[(e + 1) % nh];
+      const double lo_b = std::min(p.x(), q.x()) - pad, hi_b = std::max(p.x(), q.x()) + pad;
+      if (yb < lo_b || yb > hi_b) continue;
+      if (std::abs(q.x() - p.x()) <= pad) {
+        cmin = std::min({cmin, p.y(), q.y()});
+        cmax = std::max({cmax, p.y(), q.y()});
+      } else {
+        const double t = std::clamp((yb - p.x()) / (q.x() - p.x()), 0.0, 1.0);
+        const double c = p.y() + t * (q.y() - p.y());
+        cmin = std::min(cmin, c);
+        cmax = std::max(cmax, c);
+      }
+    }
+    if (!(cmin <= cmax)) continue;
+    std::int64_t c0, c1;
+    index_range(cx, cmin, cmax, &c0, &c1);
     for (std::int64_t ic = c0; ic <= c1; ++ic) {
       // Column X(t) = base + t * e_ax; clip t against the prism.
       Vector3d base;

@@ -1,6 +1,7 @@
 #include "storage/brick_map.h"
 
 #include <algorithm>
+#include <mutex>
 
 namespace sf {
 
@@ -56,28 +57,28 @@ const Brick* BrickMap::find_brick(BrickCoord c) const {
 }
 
 void BrickMap::apply(std::vector<Contribution>& batch) {
-  if (batch.empty()) return;
-  // Group by brick so each brick's lock is taken once per batch.
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> order(batch.size());
-  for (std::size_t i = 0; i < batch.size(); ++i) order[i] = {brick_of(batch[i].key, brick_level_).packed(), std::uint32_t(i)};
-  std::sort(order.begin(), order.end());
-  std::size_t i = 0;
-  while (i < order.size()) {
-    const std::uint64_t id = order[i].first;
-    Brick& b = brick(brick_of(batch[order[i].second].key, brick_level_));
-    std::lock_guard lock(b.mutex);
-    for (; i < order.size() && order[i].first == id; ++i) {
-      const Contribution& c = batch[order[i].second];
-      VoxelData& v = b.voxels.find_or_insert(c.key);
-      // Equations 2-3 (Curless & Levoy): running weighted means.
-      const float W = v.weight + c.weight;
-      v.distance = (v.weight * v.distance + c.weight * c.distance) / W;
-      v.weight = W;
-      if (c.has_colour) {
-        const float Wc = v.colour_weight + c.weight;
-        for (int k = 0; k < 3; ++k) v.colour[k] = (v.colour_weight * v.colour[k] + c.weight * float(c.colour[k])) / Wc;
-        v.colour_weight = Wc;
-      }
+  // Contributions of one batch come from neighbouring triangles and fall in runs of the same
+  // brick: hold one brick's lock per run (never two locks at once).
+  Brick* current = nullptr;
+  std::uint64_t current_id = ~std::uint64_t{0};
+  std::unique_lock<std::mutex> lock;
+  for (const Contribution& c : batch) {
+    const BrickCoord bc = brick_of(c.key, brick_level_);
+    if (bc.packed() != current_id) {
+      if (lock.owns_lock()) lock.unlock();
+      current = &brick(bc);
+      current_id = bc.packed();
+      lock = std::unique_lock<std::mutex>(current->mutex);
+    }
+    VoxelData& v = current->voxels.find_or_insert(c.key);
+    // Equations 2-3 (Curless & Levoy): running weighted means.
+    const float W = v.weight + c.weight;
+    v.distance = (v.weight * v.distance + c.weight * c.distance) / W;
+    v.weight = W;
+    if (c.has_colour) {
+      const float Wc = v.colour_weight + c.weight;
+      for (int k = 0; k < 3; ++k) v.colour[k] = (v.colour_weight * v.colour[k] + c.weight * float(c.colour[k])) / Wc;
+      v.colour_weight = Wc;
     }
   }
 }

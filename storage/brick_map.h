@@ -51,7 +51,7 @@ class BrickMap {
 
   // Applies equations 2-3 for every contribution. Safe to call from several threads at once.
   // Each voxel must receive at most one contribution per depth map, and depth maps must be applied
-  // in a fixed order: then the result does not depend on thread timing. Sorts `batch` in place.
+  // in a fixed order: then the result does not depend on thread timing.
   void apply(std::vector<Contribution>& batch);
 
   const VoxelData* find(VoxelKey key) const;  // not safe concurrently with apply()
