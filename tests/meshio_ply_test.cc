@@ -207,6 +207,16 @@ TEST(MeshioPly, HandWrittenStrips) {
   EXPECT_EQ(m.faces, faces);
 }
 
+TEST(MeshioPly, FacesBeforeVertices) {
+  // PLY does not fix the element order; indices are checked once everything is read.
+  const fs::path dir = test::scratch_dir("meshio_order");
+  const std::string head = "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\n"
+                           "element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+  const Mesh m = read_ply_mesh(write_text(dir, "ok.ply", head + "3 2 1 0\n0 0 0\n1 0 0\n0 1 0\n"));
+  EXPECT_EQ(m.faces, (std::vector<std::array<std::uint32_t, 3>>{{2, 1, 0}}));
+  expect_input_error(write_text(dir, "bad.ply", head + "3 3 1 0\n0 0 0\n1 0 0\n0 1 0\n"), "vertex 3");
+}
+
 TEST(MeshioPly, StanfordBunnyFiles) {
   const fs::path data = test::shared_data() / "stanford_bunny";
   const Mesh z = read_ply_mesh(data / "reconstruction" / "bun_zipper.ply");

@@ -154,8 +154,8 @@ void write_colmap(const SyntheticScene& scene, const fs::path& dir, const SceneW
               g17(s.fy) + " " + g17(s.cx) + " " + g17(s.cy) + "\n";
       const Eigen::Vector4d q = quaternion(s.R);
       imgs += id;
-      for (int k = 0; k < 4; ++k) imgs += " " + g17(q[k]);
-      for (int k = 0; k < 3; ++k) imgs += " " + g17(s.t[k]);
+      for (int k = 0; k < 4; ++k) (imgs += ' ') += g17(q[k]);
+      for (int k = 0; k < 3; ++k) (imgs += ' ') += g17(s.t[k]);
       imgs += " " + id + " " + view_file(v) + "\n\n";  // then the (empty) 2D points line
     }
     emit(sparse / "cameras.txt", cams);
@@ -186,7 +186,7 @@ std::string mve_meta(const SynthView& v, std::size_t id) {
   out += "radial_distortion = 0 0\n";
   out += "rotation =";
   for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) out += " " + g17(s.R(r, c));
+    for (int c = 0; c < 3; ++c) (out += ' ') += g17(s.R(r, c));
   out += "\ntranslation = " + g17(s.t[0]) + " " + g17(s.t[1]) + " " + g17(s.t[2]) + "\n";
   out += "\n[view]\n";
   out += "id = " + std::to_string(id) + "\n";
@@ -231,7 +231,10 @@ void write_mve(const SyntheticScene& scene, const fs::path& dir, WrittenScene& o
 std::string matrix_text(const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic>& m) {
   std::string out;
   for (int r = 0; r < m.rows(); ++r) {
-    for (int c = 0; c < m.cols(); ++c) out += (c ? " " : "") + fmt("%.18e", m(r, c));
+    for (int c = 0; c < m.cols(); ++c) {
+      if (c) out += ' ';
+      out += fmt("%.18e", m(r, c));
+    }
     out += "\n";
   }
   return out;

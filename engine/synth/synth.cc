@@ -40,7 +40,7 @@ std::vector<Eigen::Vector3f> vertex_normals(const Mesh& mesh) {
   std::vector<Eigen::Vector3f> out(acc.size());
   for (std::size_t i = 0; i < acc.size(); ++i) {
     const double len = acc[i].norm();
-    out[i] = len > 0 ? (acc[i] / len).cast<float>() : Eigen::Vector3f::Zero();
+    out[i] = len > 0 ? Eigen::Vector3f((acc[i] / len).cast<float>()) : Eigen::Vector3f::Zero();
   }
   return out;
 }
@@ -155,6 +155,7 @@ void SynthOptions::check() const {
   require(size > 0 && std::isfinite(size), "size", "> 0", size);
   require(far_views >= 0 && far_views <= 10000, "far_views", "in [0, 10000]", far_views);
   require(close_views >= 0 && close_views <= 10000, "close_views", "in [0, 10000]", close_views);
+  require(far_views > 0 || close_views == 0, "far_views", "> 0 when there are close views (they are placed by the far views' footprint)", far_views);
   require(far_views + close_views > 0, "far_views + close_views", "> 0", far_views + close_views);
   require(far_width >= 8 && far_width <= 16384, "far_width", "in [8, 16384]", far_width);
   require(far_height >= 8 && far_height <= 16384, "far_height", "in [8, 16384]", far_height);
@@ -236,10 +237,10 @@ SyntheticScene render_scene(const Mesh& mesh, const SynthOptions& o, const Progr
   {
     const double f_nominal = o.focal * o.far_width;
     const double half_fov = std::atan(0.5 * std::min(o.far_width, o.far_height) / f_nominal);
+    const double distance = bound / (o.far_fill * std::sin(half_fov));
     const int w = o.uniform_resolution ? o.close_width : o.far_width;
     const int h = o.uniform_resolution ? o.close_height : o.far_height;
     const double f = o.focal * w;
-    const double distance = bound / (o.far_fill * std::sin(half_fov)) * (f / f_nominal);
     const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
     std::vector<float> fp;
     for (int i = 0; i < o.far_views; ++i) {
@@ -248,9 +249,21 @@ SyntheticScene render_scene(const Mesh& mesh, const SynthOptions& o, const Progr
       const Eigen::Vector3d dir(r * std::cos(golden * i), y, r * std::sin(golden * i));
       SynthView view;
       view.name = view_name("far", i, 3);
-      view.width = w;
-      view.height = h;
-      view.sensor = look_at(distance * dir, Eigen::Vector3d::Zero(), f, w, h);
+      view.width = o.far_width;
+      view.height = o.far_height;
+      view.sensor = look_at(distance * dir, Eigen::Vector3d::Zero(), f_nominal, o.far_width, o.far_height);
+      if (o.uniform_resolution) {
+        // Same footprint with a k times longer focal length: move back along the axis until the
+        // median depth is k times the nominal one (measured on a half-resolution render).
+        SynthView nominal = downsized(view, 2);
+        cast_view(caster, nominal);
+        const double k = f / f_nominal;
+        const double z_med = nominal.median_footprint * std::sqrt(nominal.sensor.fx * nominal.sensor.fy);
+        const double back = z_med > 0 ? (k - 1) * z_med : (k - 1) * distance;
+        view.width = w;
+        view.height = h;
+        view.sensor = look_at((distance + back) * dir, Eigen::Vector3d::Zero(), f, w, h);
+      }
       render(view);
       const auto v = footprints(view);
       fp.insert(fp.end(), v.begin(), v.end());
@@ -270,7 +283,10 @@ SyntheticScene render_scene(const Mesh& mesh, const SynthOptions& o, const Progr
     scene.focus = ref.vertices[best].cast<double>();
   }
   {
-    const double rho = 0.02 * o.size;
+    // Average over a patch about half the size the close views will cover (at least 2% of the
+    // object), so that the close views face the region rather than one triangle.
+    const double rho = std::max(0.02 * o.size, 0.25 * std::min(o.close_width, o.close_height) *
+                                                   scene.coarse_footprint / o.footprint_ratio);
     Eigen::Vector3d n = Eigen::Vector3d::Zero();
     for (const auto& f : ref.faces) {
       const Eigen::Vector3d a = ref.vertices[f[0]].cast<double>(), b = ref.vertices[f[1]].cast<double>(),
@@ -310,13 +326,13 @@ SyntheticScene render_scene(const Mesh& mesh, const SynthOptions& o, const Progr
       view.sensor = look_at(scene.focus + distance * dirs[k], scene.focus, f, o.close_width, o.close_height);
       return view;
     };
-    // Calibrate the distance on quarter-resolution renders: the median footprint of the close views
+    // Calibrate the distance on 1/8-resolution renders: the median footprint of the close views
     // scales (nearly) with their distance to the focus.
     double distance = target * f;
     for (int iter = 0; iter < 4; ++iter) {
       std::vector<float> fp;
       for (int k = 0; k < o.close_views; ++k) {
-        SynthView low = downsized(make(k, distance), 4);
+        SynthView low = downsized(make(k, distance), 8);
         cast_view(caster, low);
         for (float z : low.depth)
           if (z > 0) fp.push_back(float(z / f));
@@ -326,18 +342,36 @@ SyntheticScene render_scene(const Mesh& mesh, const SynthOptions& o, const Progr
       distance *= ratio;
       if (std::abs(ratio - 1) < 0.005) break;
     }
-    std::vector<float> fp;
+    // Full resolution; the median can differ a little from the low-resolution one (thin parts,
+    // silhouettes), so one more placement if it is off by more than 2%.
+    std::vector<SynthView> close;
+    for (int pass = 0; pass < 2; ++pass) {
+      close.clear();
+      std::vector<float> fp;
+      for (int k = 0; k < o.close_views; ++k) {
+        SynthView view = make(k, distance);
+        if (pass == 0) {
+          render(view);
+        } else {
+          cast_view(caster, view);
+          report(progress, "render (close views placed again)", k + 1, o.close_views);
+        }
+        const auto v = footprints(view);
+        fp.insert(fp.end(), v.begin(), v.end());
+        close.push_back(std::move(view));
+      }
+      scene.fine_footprint = median(std::move(fp));
+      const double ratio = target / scene.fine_footprint;
+      if (std::abs(ratio - 1) <= 0.02) break;
+      distance *= ratio;
+    }
     double radius = std::numeric_limits<double>::infinity();
-    for (int k = 0; k < o.close_views; ++k) {
-      SynthView view = make(k, distance);
-      render(view);
-      const auto v = footprints(view);
-      fp.insert(fp.end(), v.begin(), v.end());
+    for (SynthView& view : close) {
+      if (view.valid_pixels == 0) throw InputError("synth: view " + view.name + " sees no surface (check the focus)");
       const double z_focus = (view.sensor.R * scene.focus + view.sensor.t).z();
       radius = std::min(radius, 0.8 * 0.5 * std::min(view.width, view.height) * z_focus / f);
       scene.views.push_back(std::move(view));
     }
-    scene.fine_footprint = median(std::move(fp));
     scene.close_radius = radius;
   }
 

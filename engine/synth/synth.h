@@ -44,7 +44,8 @@ struct SynthOptions {
 
   // Close views: on a cone of half-angle `close_tilt_deg` around the surface normal at the focus
   // (a single close view looks straight along the normal), looking at the focus, at the distance
-  // where their median footprint is coarse footprint / `footprint_ratio`.
+  // where their median footprint is coarse footprint / `footprint_ratio` within 2% (so close
+  // views need far views).
   int close_views = 4;
   int close_width = 640, close_height = 480;
   double footprint_ratio = 14.0;  // NOTES: 14.5 mm / 1.05 mm
@@ -57,8 +58,8 @@ struct SynthOptions {
   double focal = 1.0;
 
   // One resolution for all views (RGB-D stores a single K): far views are rendered at the close
-  // views' size and focal length, and moved back so that their footprint stays what it would be
-  // at far_width x far_height.
+  // views' size and focal length, each moved back along its axis so that its median footprint
+  // stays what it would be at far_width x far_height.
   bool uniform_resolution = false;
 
   // Gaussian depth noise along the optical axis with sigma = noise * the pixel's footprint.
@@ -99,7 +100,9 @@ struct SyntheticScene {
 };
 
 // Renders the scene. Throws InputError if the mesh has no (non-degenerate) triangle or if a view
-// sees nothing; progress stage "render" counts views.
+// sees nothing; progress stage "render" counts views. Pixels are cast with tbb::parallel_for in
+// the caller's task arena (no arena or thread pool of its own); the result does not depend on the
+// number of threads (noise is drawn per view, serially, from seed and view index).
 SyntheticScene render_scene(const Mesh& mesh, const SynthOptions& options, const ProgressFn& progress = {});
 
 // Ray-casts one view of `mesh` (already in the frame of `view.sensor`): fills depth (z), colour,
