@@ -44,6 +44,9 @@ struct PreparedTriangle {
   Vector2d q[3];          // sensor-plane positions
   std::uint32_t idx[3];
   Vector3d normal;        // unit, facing the sensor
+  Vector3d dir[3];        // lines of sight through the vertices
+  Vector3d side_normal[3];  // unit normals of the prism's side planes (plane e through edge e)
+  double side_offset[3];
   // Edge e joins local vertices lo[e], hi[e] (ordered by sample index, so the triangle on the
   // other side computes bit-identical edge functions); side[e] = sign of the edge function at the
   // opposite vertex, opp_value[e] its value.
@@ -79,6 +82,20 @@ PreparedTriangle prepare(const DepthFrame& f, const FrameTriangle& t) {
   const Vector3d centroid = (p.P[0] + p.P[1] + p.P[2]) / 3.0;
   if (n.dot(f.sensor.ray_direction(centroid)) > 0) n = -n;
   p.normal = n;
+  const Sensor& sensor = f.sensor;
+  const bool perspective = sensor.kind == Sensor::Kind::Perspective;
+  const Vector3d C = sensor.centre(), axis = sensor.axis();
+  for (int k = 0; k < 3; ++k) p.dir[k] = sensor.ray_direction(p.P[k]);
+  for (int e = 0; e < 3; ++e) {
+    const Vector3d& A = p.P[(e + 1) % 3];
+    const Vector3d& B = p.P[(e + 2) % 3];
+    Vector3d m = perspective ? (A - C).cross(B - C) : (B - A).cross(axis);
+    if (m.dot(p.P[e] - A) < 0) m = -m;
+    const double mn = m.norm();
+    if (!(mn > 0)) return p;
+    p.side_normal[e] = m / mn;
+    p.side_offset[e] = p.side_normal[e].dot(A);
+  }
   for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e
     int a = (e + 1) % 3, b = (e + 2) % 3;
     if (p.idx[a] > p.idx[b]) std::swap(a, b);
@@ -101,10 +118,10 @@ struct HalfSpace {
 
 }  // namespace
 
-void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, int level, int level_of_triangle,
+namespace {
+
+void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, int level, int level_of_triangle,
                             const RootCube& root, const IntegrateOptions& options, std::vector<Contribution>& out) {
-  const PreparedTriangle T = prepare(frame, tri);
-  if (!T.ok) return;
   const Sensor& sensor = frame.sensor;
   const double h = root.cell_size(level);
   double ramp = ramp_length(options.gamma, h);
@@ -116,26 +133,14 @@ void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, i
   // as five half-spaces (three sides, two caps; the caps bound |n.(X-P0)| <= ramp, which contains
   // |distance| <= ramp since |n.dir| <= 1).
   HalfSpace planes[5];
-  const bool perspective = sensor.kind == Sensor::Kind::Perspective;
-  const Vector3d C = sensor.centre(), axis = sensor.axis();
-  for (int e = 0; e < 3; ++e) {
-    const Vector3d& A = T.P[(e + 1) % 3];
-    const Vector3d& B = T.P[(e + 2) % 3];
-    Vector3d m = perspective ? (A - C).cross(B - C) : (B - A).cross(axis);
-    if (m.dot(T.P[e] - A) < 0) m = -m;
-    const double mn = m.norm();
-    if (!(mn > 0)) return;
-    m /= mn;
-    planes[e] = {m, m.dot(A) - margin};
-  }
+  for (int e = 0; e < 3; ++e) planes[e] = {T.side_normal[e], T.side_offset[e] - margin};
   // A voxel at ray distance |d| <= ramp from the triangle lies within |n.(X - P0)| <= ramp * |n.dir|.
   double max_cos = 0;
   Vector3d corner[6];
   for (int k = 0; k < 3; ++k) {
-    const Vector3d dir = sensor.ray_direction(T.P[k]);
-    max_cos = std::max(max_cos, std::abs(T.normal.dot(dir)));
-    corner[2 * k] = T.P[k] - ramp * dir;
-    corner[2 * k + 1] = T.P[k] + ramp * dir;
+    max_cos = std::max(max_cos, std::abs(T.normal.dot(T.dir[k])));
+    corner[2 * k] = T.P[k] - ramp * T.dir[k];
+    corner[2 * k + 1] = T.P[k] + ramp * T.dir[k];
   }
   const double slab = ramp * max_cos + margin;
   planes[3] = {T.normal, T.normal.dot(T.P[0]) - slab};
@@ -144,7 +149,7 @@ void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, i
   // March along the axis most aligned with the lines of sight: columns then run down the prism's
   // long side, and few columns miss it.
   int ax = 0;
-  sensor.ray_direction((T.P[0] + T.P[1] + T.P[2]) / 3.0).cwiseAbs().maxCoeff(&ax);
+  (T.dir[0] + T.dir[1] + T.dir[2]).cwiseAbs().maxCoeff(&ax);
   const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
   // The prism's shadow on the (b, c) plane: the convex hull of the six corners' projections,
   // grown by the margin (perspective caps bulge by far less than a cell).
@@ -267,6 +272,14 @@ void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, i
   }
 }
 
+}  // namespace
+
+void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, int level, int level_of_triangle,
+                            const RootCube& root, const IntegrateOptions& options, std::vector<Contribution>& out) {
+  const PreparedTriangle T = prepare(frame, tri);
+  if (T.ok) contributions_at_level(frame, T, level, level_of_triangle, root, options, out);
+}
+
 IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
                                const RootCube& root, const IntegrateOptions& options, BrickMap& map) {
   IntegrateStats total;
@@ -284,7 +297,9 @@ IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameT
                                                : triangle_level(root.size, options.lambda, footprint, options.max_level);
       const int coarsest = options.single_level >= 0 ? lt : std::max(0, lt - options.coarser_levels);
       const std::size_t before = batch.size();
-      for (int l = lt; l >= coarsest; --l) triangle_contributions(frame, tri, l, lt, root, options, batch);
+      const PreparedTriangle T = prepare(frame, tri);
+      if (T.ok)
+        for (int l = lt; l >= coarsest; --l) contributions_at_level(frame, T, l, lt, root, options, batch);
       ++local.triangles;
       ++local.triangles_per_level[lt];
       local.contributions += batch.size() - before;
