@@ -3,6 +3,37 @@
 //   Delaunay tetrahedralization of the voxel positions (CGAL, parallel in the caller's arena) ->
 //   deletion of tetrahedra with an edge between non-neighbouring voxels (7.1) ->
 //   vertex snapping and Marching Tetrahedra without zero-area faces (7.2) -> indexed mesh.
+//
+// Glossary
+//   voxel index   rank of a voxel in key order (keys sort by level, then z, y, x). Every identity
+//                 below is made of voxel indices, so sorting by them sorts by voxel keys.
+//   crossing      the zero of the linear interpolant on an edge whose two voxels have distances of
+//                 strictly opposite signs; identified by the voxel pair (lo, hi), lo < hi.
+//   zero voxel    a voxel whose distance is exactly 0 (given, or snapped); identified by (i, i).
+//   snapping      7.2: a voxel whose crossing on some edge lies closer than snap_fraction (of that
+//                 edge) is moved onto the crossing: position, colour, weight and scale become the
+//                 crossing's interpolated values and its distance becomes 0.
+//
+// Marching Tetrahedra with exact zeros (n-, n0, n+ = vertices below, on, above zero):
+//   (1,0,3) (3,0,1) (1,1,2) (2,1,1) (1,2,1)  one triangle
+//   (2,0,2)                                  two triangles (the quad split along its shorter
+//                                            diagonal; ties: the diagonal holding the smallest
+//                                            vertex identity)
+//   (1,3,0)                                  the zero face, see below
+//   everything else                          nothing: (4,0,0) (0,0,4) (3,1,0) (0,1,3) (2,2,0)
+//                                            (0,2,2) (0,3,1) (0,4,0) only touch zero in a vertex,
+//                                            an edge, a face seen from the positive side, or are
+//                                            entirely zero
+//   A face whose three voxels are zero is emitted by the tetrahedron on its negative side (the
+//   fourth vertex negative), oriented away from it, unless the tetrahedron on the other side of
+//   the face also has a negative fourth vertex: then the face lies inside the solid and neither
+//   emits it. The output is thus the boundary of the region {distance < 0} of the kept complex,
+//   and every face is emitted at most once. A triangle always has three distinct vertex
+//   identities on distinct edges / vertices of its tetrahedron, so none is degenerate by
+//   construction (snapping can still move a zero voxel, which is how it removes tiny triangles).
+//   Orientation: the normal (v1 - v0) x (v2 - v0) points toward positive distance (outside); it
+//   is derived from the orientation of the Delaunay tetrahedron, so it is consistent over the
+//   whole mesh even where snapping moved vertices.
 #include <array>
 #include <cstddef>
 #include <vector>
@@ -26,21 +57,44 @@ struct ExtractOptions {
   int neighbourhood_n = 2;        // n of section 7.1 (voxels at the finer level)
   double snap_fraction = 0.2;     // 7.2: snap a voxel onto a crossing closer than this edge fraction; 0 = off
   std::size_t min_component_triangles = 0;  // drop connected components smaller than this; 0 = keep all
+  // Insert the points with CGAL's parallel (Parallel_tag, lock grid) insertion when the calling
+  // arena has more than one thread and there are at least this many voxels. The triangulation is
+  // the same either way; 0 = parallel whenever the arena allows it.
+  std::size_t parallel_min_voxels = 20000;
   void check() const;             // throws InputError on a bad value
 };
 
 struct ExtractStats {
+  // voxels: triangulated; tetrahedra: finite Delaunay cells; kept_tetrahedra: cells left by 7.1;
+  // snapped_voxels: moved onto a crossing (7.2).
   std::size_t voxels = 0, tetrahedra = 0, kept_tetrahedra = 0, snapped_voxels = 0;
+  // triangles: in the output; removed_*: dropped by min_component_triangles.
   std::size_t triangles = 0, removed_components = 0, removed_triangles = 0;
+  // Voxels dropped because a finer voxel of the input sits at the same position (section 6's last
+  // pass keeps the finest); not counted in `voxels`.
+  std::size_t coincident_voxels = 0;
+  // Zero faces with negative voxels on both sides (inside the solid), emitted by neither side.
+  std::size_t interior_zero_faces = 0;
 };
 
 // 7.1: are voxels a and b neighbours? With A the coarser (L(A) <= L(B)), b must lie within
 // 2^(L(B)-L(A)) + n voxels of level L(B) from a's position, per axis.
 bool are_neighbours(VoxelKey a, VoxelKey b, int n);
 
-// Extracts the zero set. The output is deterministic for a given voxel set (independent of thread
-// count and input order): vertices and faces are sorted by the voxel keys that define them.
-// Runs its parallel work in the calling TBB arena.
+// Extracts the zero set.
+//  - The triangulation is built on the voxels' integer lattice coordinates at the finest level
+//    present (exact, and the same complex as their world positions); output positions are
+//    interpolated from RootCube::position in double.
+//  - Deterministic for a given voxel set, independent of thread count and input order: vertices
+//    are sorted by the voxel keys that define them (a zero voxel's key, or a crossing's key pair,
+//    lower key first); each face is rotated so that its smallest vertex index comes first
+//    (orientation kept), and faces are sorted.
+//  - Every vertex carries colour (interpolated, rounded), confidence (interpolated weight) and
+//    scale (interpolated cell size).
+//  - Runs its parallel work in the calling TBB arena. Time and memory are dominated by the
+//    Delaunay tetrahedralization (about 550 bytes per voxel at the peak, freed before marching).
+//  - Throws InputError on an invalid key, a duplicated key, or a non-finite distance, weight or
+//    colour.
 Mesh extract_surface(const std::vector<SurfaceVoxel>& voxels, const RootCube& root, const ExtractOptions& options,
                      const ProgressFn& progress, ExtractStats* stats);
 
