@@ -37,6 +37,7 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
   s.add("input.mve_confidence", &o.input.mve_confidence, "", "MVE confidence embedding");
   s.add("input.rgbd_depth_scale", &o.input.rgbd_depth_scale, "m/unit", "metres per depth-PNG unit");
   s.add("input.rgbd_use_colour", &o.input.rgbd_use_colour, "", "colour RGB-D meshes from *.color.png|jpg");
+  s.add("input.frame_step", &o.input.frame_step, "maps", "fuse every n-th depth map (1 = all)");
   s.add("triangulate.rho", &o.triangulate.rho, "footprints", "depth discontinuity threshold ρ");
   s.add("integrate.lambda", &o.integrate.lambda, "", "sampling rate λ (equation 1)");
   s.add("integrate.gamma", &o.integrate.gamma, "cells", "ramp size factor γ: ramp = γ × cell size");
@@ -109,7 +110,10 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   options.check();
   FusionStats stats;
   stats.format = source.format();
-  stats.depth_maps = source.size();
+  // The depth maps to fuse, in input order.
+  std::vector<std::size_t> frames;
+  for (std::size_t i = 0; i < source.size(); i += std::size_t(options.input.frame_step)) frames.push_back(i);
+  stats.depth_maps = frames.size();
   const auto clip = parse_bbox(options.octree.bbox);
   auto stage_start = Clock::now();
   auto end_stage = [&](const char* name) {
@@ -122,8 +126,8 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   Eigen::AlignedBox3d bounds;
   std::mutex bounds_mutex;
   std::size_t samples = 0, bounded = 0;
-  tbb::parallel_for(std::size_t(0), source.size(), [&](std::size_t i) {
-    DepthFrame f = source.load(i);
+  tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t i) {
+    DepthFrame f = source.load(frames[i]);
     clip_to_box(f, clip);
     Eigen::AlignedBox3d b;
     std::size_t n = 0;
@@ -135,7 +139,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     std::lock_guard lock(bounds_mutex);
     if (n) bounds.extend(b);
     samples += n;
-    report(hooks.progress, "bounds", double(++bounded), double(source.size()));
+    report(hooks.progress, "bounds", double(++bounded), double(frames.size()));
   });
   if (samples == 0) throw InputError("the input holds no valid depth samples" + std::string(clip ? " inside octree.bbox" : ""));
   stats.samples = samples;
@@ -157,7 +161,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
       tokens,
       tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
                                                     [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
-                                                      if (next >= source.size()) {
+                                                      if (next >= frames.size()) {
                                                         fc.stop();
                                                         return nullptr;
                                                       }
@@ -168,7 +172,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
           tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
               tbb::filter_mode::parallel,
               [&](std::shared_ptr<Item> item) {
-                item->frame = source.load(item->index);
+                item->frame = source.load(frames[item->index]);
                 clip_to_box(item->frame, clip);
                 item->triangles = triangulate(item->frame, options.triangulate);
                 return item;
@@ -177,7 +181,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
             // Depth maps enter the field strictly in index order (equations 2-3 are order-sensitive
             // in floating point).
             integ.add(integrate_frame(item->frame, item->triangles, root, options.integrate, map));
-            report(hooks.progress, "integrate", double(++done), double(source.size()));
+            report(hooks.progress, "integrate", double(++done), double(frames.size()));
           }));
   stats.triangles = integ.triangles;
   stats.contributions = integ.contributions;

@@ -26,6 +26,7 @@ bool InputOptions::check() const {
   }
   if (!(rgbd_depth_scale > 0) || !std::isfinite(rgbd_depth_scale))
     throw bad("rgbd_depth_scale must be a positive number of metres per unit, got " + std::to_string(rgbd_depth_scale));
+  if (frame_step < 1) throw bad("frame_step must be >= 1, got " + std::to_string(frame_step));
   return true;
 }
 

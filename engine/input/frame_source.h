@@ -18,6 +18,7 @@ struct InputOptions {
   std::string mve_confidence = "conf-L0";// MVE confidence embedding; missing per view is fine
   double rgbd_depth_scale = 0.001;       // metres per depth-PNG unit (7-Scenes: millimetres)
   bool rgbd_use_colour = true;           // use *.color.(png|jpg) when its size matches the depth
+  int frame_step = 1;                    // fuse every frame_step-th depth map (redundant sequences)
   bool check() const;                    // throws InputError on a bad value
 };
 
