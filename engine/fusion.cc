@@ -54,6 +54,8 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
   s.add("extract.snap_fraction", &o.extract.snap_fraction, "edge", "vertex snapping distance (7.2); 0 = off");
   s.add("extract.min_component_triangles", &o.extract.min_component_triangles, "triangles",
         "remove connected components smaller than this; 0 = keep all");
+  s.add("extract.parallel_min_voxels", &o.extract.parallel_min_voxels, "voxels",
+        "use CGAL's parallel Delaunay insertion from this many voxels (with > 1 thread)");
   s.add("octree.bbox", &o.octree.bbox, "m", "clip box xmin,ymin,zmin,xmax,ymax,zmax; empty = data bounds");
   s.add("octree.padding", &o.octree.padding, "", "root cube margin, fraction of the data extent per side");
   s.add("octree.brick_level", &o.octree.brick_level, "level", "2^brick_level bricks per root axis");

@@ -78,8 +78,8 @@ TEST(Octree, RootCubeAndBbox) {
   Eigen::AlignedBox3d b(Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(2, 1, 1));
   const RootCube r = root_cube_for(b, 0.05);
   EXPECT_DOUBLE_EQ(r.size, 2.2);
-  EXPECT_DOUBLE_EQ(r.min.x(), -0.1);
-  EXPECT_DOUBLE_EQ(r.min.y(), 0.5 - 1.1);
+  EXPECT_NEAR(r.min.x(), -0.1, 1e-12);
+  EXPECT_NEAR(r.min.y(), 0.5 - 1.1, 1e-12);
   EXPECT_THROW(parse_bbox("0,0,0,1,1"), InputError);
   EXPECT_THROW(parse_bbox("0,0,0,1,x,1"), InputError);
   EXPECT_THROW(parse_bbox("0,0,0,-1,1,1"), InputError);
