@@ -123,6 +123,9 @@ namespace {
 void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, int level, int level_of_triangle,
                             const RootCube& root, const IntegrateOptions& options, std::vector<Contribution>& out) {
   const Sensor& sensor = frame.sensor;
+  const bool perspective = sensor.kind == Sensor::Kind::Perspective;
+  const Vector3d centre = sensor.centre(), axis = sensor.axis();
+  const Eigen::Matrix3d& R = sensor.R;
   const double h = root.cell_size(level);
   double ramp = ramp_length(options.gamma, h);
   if (level < level_of_triangle && options.coarse_reach > 0)
@@ -234,10 +237,17 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
         X = base;
         X[ax] += h * double(ia);
         Vector2d q;
-        if (!sensor.project(X, &q)) continue;
+        // Sensor::project and ray_direction, inlined with the centre hoisted out of the loop.
+        const Vector3d xs = R * X + sensor.t;
+        if (perspective) {
+          if (!(xs.z() > 0)) continue;
+          q = Vector2d(sensor.fx * xs.x() / xs.z() + sensor.cx, sensor.fy * xs.y() / xs.z() + sensor.cy);
+        } else {
+          q = xs.head<2>();
+        }
         double bary[3];
         if (!T.owns(q, bary)) continue;
-        const Vector3d dir = sensor.ray_direction(X);
+        const Vector3d dir = perspective ? Vector3d((X - centre).normalized()) : axis;
         const double cosine = T.normal.dot(dir);  // < 0: the normal faces the sensor
         if (!(-cosine >= options.min_cosine)) continue;
         const double distance = T.normal.dot(T.P[0] - X) / cosine;  // > 0: in front of the surface

@@ -14,7 +14,8 @@ struct TriangulateOptions {
   void check() const;
 };
 
-// Triangle of sample indices (row * width + col), counter-clockwise in the image.
+// Triangle of sample indices (row * width + col). Orientation in the sensor plane is not fixed
+// (range grids are mirrored); consumers derive it from positions.
 using FrameTriangle = std::array<std::uint32_t, 3>;
 
 // Depth of each sample along the sensor axis (z in the sensor frame); 0 where invalid.
