@@ -11,6 +11,7 @@
 #include "cli/commands.h"
 #include "cli/progress_printer.h"
 #include "engine/error.h"
+#include "engine/parameters.h"
 #include "engine/meshio/ply_io.h"
 #include "engine/synth/eval.h"
 #include "engine/synth/scene_writer.h"
@@ -24,28 +25,6 @@ struct EvalArgs {
   bool close_up = false, observed = false, json = false, quiet = false;
   EvalOptions eval;
 };
-
-std::vector<double> numbers(const std::string& text, std::size_t count, const std::string& option) {
-  std::vector<double> v;
-  std::stringstream ss(text);
-  std::string item;
-  auto fail = [&] {
-    return InputError(option + ": '" + text + "' is not " + std::to_string(count) + " comma-separated numbers");
-  };
-  while (std::getline(ss, item, ',')) {
-    try {
-      std::size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size()) throw fail();
-    } catch (const std::invalid_argument&) {
-      throw fail();
-    } catch (const std::out_of_range&) {
-      throw fail();
-    }
-  }
-  if (v.size() != count) throw fail();
-  return v;
-}
 
 std::string mm(double metres) {
   if (std::isnan(metres)) return "-";
@@ -62,11 +41,11 @@ nlohmann::json stats_json(const DistanceStats& s) {
 void run_eval(EvalArgs a) {
   EvalOptions& o = a.eval;
   if (!a.region.empty()) {
-    const auto v = numbers(a.region, 4, "--region");
+    const auto v = parse_number_list(a.region, 4, "--region");
     o.sphere = EvalOptions::Sphere{Eigen::Vector3d(v[0], v[1], v[2]), v[3]};
   }
   if (!a.box.empty()) {
-    const auto v = numbers(a.box, 6, "--box");
+    const auto v = parse_number_list(a.box, 6, "--box");
     o.box = Eigen::AlignedBox3d(Eigen::Vector3d(v[0], v[1], v[2]), Eigen::Vector3d(v[3], v[4], v[5]));
   }
   if ((a.close_up || a.observed) && a.scene.empty()) throw InputError("--close-up and --observed need --scene synth.json");

@@ -12,6 +12,7 @@
 #include "cli/commands.h"
 #include "cli/progress_printer.h"
 #include "engine/error.h"
+#include "engine/parameters.h"
 #include "engine/meshio/ply_io.h"
 #include "engine/synth/scene_writer.h"
 #include "engine/synth/synth.h"
@@ -29,24 +30,6 @@ struct SynthArgs {
   SceneWriteOptions write;
   bool overwrite = false, quiet = false;
 };
-
-std::vector<double> parse_numbers(const std::string& text, std::size_t count, const std::string& option) {
-  std::vector<double> v;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    try {
-      std::size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument(item);
-    } catch (const std::exception&) {
-      throw InputError(option + ": '" + text + "' is not " + std::to_string(count) + " comma-separated numbers");
-    }
-  }
-  if (v.size() != count)
-    throw InputError(option + ": '" + text + "' is not " + std::to_string(count) + " comma-separated numbers");
-  return v;
-}
 
 void parse_size(const std::string& text, const std::string& option, int* w, int* h) {
   char x = 0;
@@ -67,7 +50,7 @@ void run_synth(SynthArgs a) {
   a.write.format = *format;
   a.write.source = a.mesh;
   if (!a.focus.empty()) {
-    const auto f = parse_numbers(a.focus, 3, "--focus");
+    const auto f = parse_number_list(a.focus, 3, "--focus");
     a.synth.focus = Eigen::Vector3d(f[0], f[1], f[2]);
   }
   if (a.size_measure == "extent") a.synth.size_measure = SynthOptions::SizeMeasure::Extent;

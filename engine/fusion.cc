@@ -63,19 +63,7 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
 
 std::optional<Eigen::AlignedBox3d> parse_bbox(const std::string& text) {
   if (text.empty()) return std::nullopt;
-  std::vector<double> v;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    try {
-      std::size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument(item);
-    } catch (const std::exception&) {
-      throw InputError("octree.bbox: '" + item + "' is not a number");
-    }
-  }
-  if (v.size() != 6) throw InputError("octree.bbox needs 6 numbers xmin,ymin,zmin,xmax,ymax,zmax");
+  const std::vector<double> v = parse_number_list(text, 6, "octree.bbox (xmin,ymin,zmin,xmax,ymax,zmax)");
   Eigen::AlignedBox3d box(Eigen::Vector3d(v[0], v[1], v[2]), Eigen::Vector3d(v[3], v[4], v[5]));
   if (!(box.min().array() < box.max().array()).all()) throw InputError("octree.bbox: min must be < max on every axis");
   return box;

@@ -10,16 +10,6 @@
 
 namespace sf {
 
-void ParameterSet::add(std::string name, Target target, std::string unit, std::string help) {
-  params_.push_back({std::move(name), std::move(unit), std::move(help), target});
-}
-
-ParameterSet::Parameter* ParameterSet::find(const std::string& name) {
-  for (auto& p : params_)
-    if (p.name == name) return &p;
-  return nullptr;
-}
-
 namespace {
 template <class T>
 bool parse_number(const std::string& s, T* out) {
@@ -29,6 +19,32 @@ bool parse_number(const std::string& s, T* out) {
   return ec == std::errc() && ptr == e;
 }
 }  // namespace
+
+std::vector<double> parse_number_list(const std::string& text, std::size_t count, const std::string& what) {
+  const auto fail = [&] {
+    return InputError(what + ": '" + text + "' is not " + std::to_string(count) + " comma-separated numbers");
+  };
+  std::vector<double> v;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    double x;
+    if (!parse_number(item, &x) || !std::isfinite(x)) throw fail();
+    v.push_back(x);
+  }
+  if (v.size() != count) throw fail();
+  return v;
+}
+
+void ParameterSet::add(std::string name, Target target, std::string unit, std::string help) {
+  params_.push_back({std::move(name), std::move(unit), std::move(help), target});
+}
+
+ParameterSet::Parameter* ParameterSet::find(const std::string& name) {
+  for (auto& p : params_)
+    if (p.name == name) return &p;
+  return nullptr;
+}
 
 void ParameterSet::set(const std::string& name, const std::string& value, const std::string& origin) {
   Parameter* p = find(name);

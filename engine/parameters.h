@@ -10,6 +10,10 @@
 
 namespace sf {
 
+// Parses exactly `count` comma-separated numbers ("1,2.5,-3"); throws InputError naming `what`
+// (an option or parameter name) otherwise.
+std::vector<double> parse_number_list(const std::string& text, std::size_t count, const std::string& what);
+
 class ParameterSet {
  public:
   using Target = std::variant<double*, int*, bool*, std::string*, std::size_t*>;

@@ -36,10 +36,8 @@ struct Img {
   int num_points2d = 0;
 };
 
-void write_text(const fs::path& p, const std::string& s) {
-  fs::create_directories(p.parent_path());
-  std::ofstream(p, std::ios::binary) << s;
-}
+using test::expect_input_error;
+using test::write_text;
 std::string read_all(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(in), {});
@@ -240,17 +238,6 @@ TEST(InputColmap, ColourIsSampledNearestWhenTheMapIsSmaller) {
 
 // --- bad input: every case is one InputError naming the file.
 
-void expect_input_error(const std::function<void()>& fn, const std::string& file_part, const std::string& what) {
-  try {
-    fn();
-    ADD_FAILURE() << "no error; expected one naming " << file_part;
-  } catch (const InputError& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find(file_part), std::string::npos) << msg;
-    EXPECT_NE(msg.find(what), std::string::npos) << msg;
-    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-  }
-}
 
 void load_all(const fs::path& ws) {
   const auto src = open_input(ws, {});

@@ -21,10 +21,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-void write_text(const fs::path& p, const std::string& s) {
-  fs::create_directories(p.parent_path());
-  std::ofstream(p, std::ios::binary) << s;
-}
+using test::expect_input_error;
+using test::write_text;
 std::string read_all(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(in), {});
@@ -154,17 +152,6 @@ TEST(InputMve, ConfidenceAndColour) {
   EXPECT_TRUE(f2.confidence.empty());
 }
 
-void expect_input_error(const std::function<void()>& fn, const std::string& file_part, const std::string& what) {
-  try {
-    fn();
-    ADD_FAILURE() << "no error; expected one naming " << file_part;
-  } catch (const InputError& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find(file_part), std::string::npos) << msg;
-    EXPECT_NE(msg.find(what), std::string::npos) << msg;
-    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-  }
-}
 void load_all(const fs::path& scene) {
   const auto src = open_input(scene, {});
   for (std::size_t i = 0; i < src->size(); ++i) src->load(i);

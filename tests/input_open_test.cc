@@ -16,10 +16,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-void write_text(const fs::path& p, const std::string& s) {
-  fs::create_directories(p.parent_path());
-  std::ofstream(p, std::ios::binary) << s;
-}
+using test::write_text;
 
 void expect_input_error(const std::function<void()>& fn, const std::string& what) {
   try {

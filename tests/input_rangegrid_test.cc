@@ -18,10 +18,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-void write_text(const fs::path& p, const std::string& s) {
-  fs::create_directories(p.parent_path());
-  std::ofstream(p, std::ios::binary) << s;
-}
+using test::expect_input_error;
+using test::write_text;
 
 // A 3 x 2 grid (num_cols 3, num_rows 2), cells row by row; cell (row 1, col 0) is empty.
 // Points in the scan frame: columns 1 mm apart in x, rows 2 mm apart in y.
@@ -75,17 +73,6 @@ TEST(InputRangeGrid, HandWorkedScan) {
   EXPECT_FLOAT_EQ(f.confidence[1], 0.5f);
 }
 
-void expect_input_error(const std::function<void()>& fn, const std::string& file_part, const std::string& what) {
-  try {
-    fn();
-    ADD_FAILURE() << "no error; expected one naming " << file_part;
-  } catch (const InputError& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find(file_part), std::string::npos) << msg;
-    EXPECT_NE(msg.find(what), std::string::npos) << msg;
-    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-  }
-}
 void load_all(const fs::path& dir) {
   const auto src = open_input(dir, {});
   for (std::size_t i = 0; i < src->size(); ++i) src->load(i);

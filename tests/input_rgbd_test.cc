@@ -16,10 +16,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-void write_text(const fs::path& p, const std::string& s) {
-  fs::create_directories(p.parent_path());
-  std::ofstream(p, std::ios::binary) << s;
-}
+using test::expect_input_error;
+using test::write_text;
 
 // 4x3 frames; K: fx = fy = 100, cx = 1, cy = 1 in OpenCV's convention (pixel centres at integers).
 // Camera-to-world: rotation 90 degrees about y, camera centre at (1, 0, 0).
@@ -79,17 +77,6 @@ TEST(InputRgbd, HandWorkedFrame) {
   EXPECT_NEAR(open_input(dir, metres)->load(1).position[i].x(), 16.0, 1e-5);
 }
 
-void expect_input_error(const std::function<void()>& fn, const std::string& file_part, const std::string& what) {
-  try {
-    fn();
-    ADD_FAILURE() << "no error; expected one naming " << file_part;
-  } catch (const InputError& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find(file_part), std::string::npos) << msg;
-    EXPECT_NE(msg.find(what), std::string::npos) << msg;
-    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-  }
-}
 void load_all(const fs::path& dir) {
   const auto src = open_input(dir, {});
   for (std::size_t i = 0; i < src->size(); ++i) src->load(i);

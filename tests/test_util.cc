@@ -2,7 +2,12 @@
 
 #include <unistd.h>
 
+#include <gtest/gtest.h>
+
 #include <array>
+#include <fstream>
+
+#include "engine/error.h"
 #include <cstdio>
 #include <sys/wait.h>
 
@@ -28,6 +33,23 @@ int run_command(const std::string& command, std::string* log) {
     if (log) log->append(buf.data(), n);
   const int status = ::pclose(pipe);
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+void write_text(const std::filesystem::path& path, const std::string& text) {
+  std::filesystem::create_directories(path.parent_path());
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+void expect_input_error(const std::function<void()>& fn, const std::string& file_part, const std::string& what) {
+  try {
+    fn();
+    ADD_FAILURE() << "no error; expected one naming " << file_part;
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(file_part), std::string::npos) << msg;
+    EXPECT_NE(msg.find(what), std::string::npos) << msg;
+    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+  }
 }
 
 }  // namespace sf::test

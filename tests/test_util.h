@@ -1,6 +1,7 @@
 #pragma once
 // Helpers shared by tests: scratch folders and paths to data.
 #include <filesystem>
+#include <functional>
 #include <string>
 
 namespace sf::test {
@@ -13,5 +14,9 @@ std::filesystem::path shared_data();
 std::filesystem::path scalefuse_binary();
 // Runs a shell command, returns its exit status (0 = success); output goes to `log` if given.
 int run_command(const std::string& command, std::string* log = nullptr);
+// Writes `text` to `path`, creating its folders.
+void write_text(const std::filesystem::path& path, const std::string& text);
+// Expects fn() to throw sf::InputError whose one-line message contains file_part and what.
+void expect_input_error(const std::function<void()>& fn, const std::string& file_part, const std::string& what);
 
 }  // namespace sf::test
