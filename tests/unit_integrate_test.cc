@@ -112,12 +112,15 @@ TEST(Integrate, DistancesAndWeightsOnAPlane) {
   EXPECT_EQ(map.find(VoxelKey::make(7, 50, 50, 45)), nullptr);
   // Outside the image nothing is created: x = 0.8 projects to u = 50.
   EXPECT_EQ(map.find(VoxelKey::make(7, 90, 50, 50)), nullptr);
-  // Coarser levels got the plane too: level 6 voxel (25, 25, 23) at z = 1.92, ramp 16 cm:
-  // distance 8 cm, weight 0.5.
-  v = map.find(VoxelKey::make(6, 25, 25, 23));
+  // Coarser levels got the plane too. Level 6 (cell 4 cm) would have a 16 cm ramp, but coarser
+  // insertions reach only coarse_reach (1) x the triangle's own 8 cm ramp: voxel (25, 25, 24) at
+  // z = 1.96 is 4 cm in front, weight 1 - 4/8 = 0.5; (25, 25, 23) at 8 cm is at the ramp's end
+  // (weight 0, never created).
+  v = map.find(VoxelKey::make(6, 25, 25, 24));
   ASSERT_NE(v, nullptr);
-  EXPECT_NEAR(v->distance, 0.08, 1e-6);
+  EXPECT_NEAR(v->distance, 0.04, 1e-6);
   EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  EXPECT_EQ(map.find(VoxelKey::make(6, 25, 25, 23)), nullptr);
   // Level 2 (4 levels up from 7): present; level 1 not.
   bool level2 = false, level1 = false;
   for (Brick* b : map.bricks())
