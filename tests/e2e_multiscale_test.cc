@@ -94,7 +94,6 @@ TEST_F(MultiScale, AccuracyAndCompletenessWithinTheFootprints) {
 
 TEST_F(MultiScale, CoarseViewsDoNotDegradeTheCloseUpButDegradeSingleLevelFusion) {
   // The single-level baseline: every triangle at the close views' level, no regularization (VRIP).
-  const json stats_flag = json::object();
   const fs::path sf_close = fuse("close", "scalefuse_close", "--stats " + (*dir_ / "close_stats.json").string());
   const json stats = read_json(*dir_ / "close_stats.json");
   int fine_level = 0;
