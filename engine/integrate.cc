@@ -116,10 +116,6 @@ struct HalfSpace {
   double k;
 };
 
-}  // namespace
-
-namespace {
-
 void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, int level, int level_of_triangle,
                             const RootCube& root, const IntegrateOptions& options, std::vector<Contribution>& out) {
   const Sensor& sensor = frame.sensor;
@@ -133,8 +129,7 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
   const double margin = 1e-3 * h;
 
   // The truncated prism swept by the lines of sight through the triangle, |distance| <= ramp,
-  // as five half-spaces (three sides, two caps; the caps bound |n.(X-P0)| <= ramp, which contains
-  // |distance| <= ramp since |n.dir| <= 1).
+  // as five half-spaces: three sides and two caps parallel to the triangle (below).
   HalfSpace planes[5];
   for (int e = 0; e < 3; ++e) planes[e] = {T.side_normal[e], T.side_offset[e] - margin};
   // A voxel at ray distance |d| <= ramp from the triangle lies within |n.(X - P0)| <= ramp * |n.dir|.

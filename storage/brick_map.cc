@@ -28,12 +28,6 @@ std::size_t BrickMap::voxel_count() const {
   return n;
 }
 
-std::size_t BrickMap::memory_bytes() const {
-  std::size_t n = 0;
-  for (Brick* b : bricks()) n += sizeof(Brick) + b->voxels.memory_bytes();
-  return n;
-}
-
 Brick& BrickMap::brick(BrickCoord c) {
   const std::uint64_t id = c.packed();
   {

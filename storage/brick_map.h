@@ -47,7 +47,6 @@ class BrickMap {
   int brick_level() const { return brick_level_; }
   std::size_t brick_count() const;
   std::size_t voxel_count() const;
-  std::size_t memory_bytes() const;
 
   // Applies equations 2-3 for every contribution. Safe to call from several threads at once.
   // Each voxel must receive at most one contribution per depth map, and depth maps must be applied

@@ -25,7 +25,6 @@ class VoxelTable {
 
   std::size_t size() const { return size_; }  // slots in use, erased ones included until compact()
   std::size_t capacity() const { return keys_.size(); }
-  std::size_t memory_bytes() const { return keys_.size() * (sizeof(std::uint64_t) + sizeof(VoxelData)); }
 
   VoxelData* find(VoxelKey key);
   const VoxelData* find(VoxelKey key) const;

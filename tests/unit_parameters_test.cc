@@ -52,7 +52,9 @@ TEST(Parameters, EveryPresetLoadsAndChecks) {
       EXPECT_DOUBLE_EQ(o.regularize.tau0, 0.5);
       EXPECT_DOUBLE_EQ(o.regularize.tau1, 0.1);
     }
-    if (std::string(name) == "laser") EXPECT_DOUBLE_EQ(o.regularize.tau0, 0.0);
+    if (std::string(name) == "laser") {
+      EXPECT_DOUBLE_EQ(o.regularize.tau0, 0.0);
+    }
   }
 }
 
