@@ -2,6 +2,8 @@
 // with 1 and 2 threads in one run so the ratio is meaningful on a noisy machine.
 //   cmake -S . -B build-bench -DSCALEFUSE_BUILD_BENCH=ON && cmake --build build-bench -j2 --target integrate_bench
 //   build-bench/bin/integrate_bench [frames=8] [gamma=4]
+// Compares the voxel-centric enumeration (the default for perspective frames) with the prism
+// enumeration (range grids) on the same frames.
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -60,6 +62,13 @@ int main(int argc, char** argv) {
   }
   const RootCube root{Eigen::Vector3d::Constant(-1.1), 2.2};
   std::printf("%d frames, %zu samples, gamma %.1f, %d coarser levels\n", frames, samples, opt.gamma, opt.coarser_levels);
+  struct Method {
+    const char* name;
+    IntegrateStats (*run)(const DepthFrame&, const std::vector<FrameTriangle>&, const RootCube&, const IntegrateOptions&,
+                          BrickMap&);
+  };
+  const Method methods[] = {{"voxel-centric (default)", &integrate_frame}, {"prisms", &integrate_frame_prisms}};
+  for (const Method& method : methods)
   for (int threads : {1, 2}) {
     std::vector<double> runs;
     std::size_t contributions = 0, voxels = 0;
@@ -69,14 +78,23 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       arena.execute([&] {
         contributions = 0;
-        for (int i = 0; i < frames; ++i) contributions += integrate_frame(views[i], tris[i], root, opt, map).contributions;
+        for (int i = 0; i < frames; ++i) contributions += method.run(views[i], tris[i], root, opt, map).contributions;
       });
       runs.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
       voxels = map.voxel_count();
+      if (rep == 0 && threads == 1) {
+        std::size_t blocks = 0, bytes = 0;
+        for (Brick* b : map.bricks()) {
+          blocks += b->voxels.block_count();
+          bytes += b->voxels.memory_bytes();
+        }
+        std::printf("%s: %zu voxels in %zu blocks, %.1f voxels/block, %.1f bytes/voxel\n", method.name, voxels, blocks,
+                    double(voxels) / blocks, double(bytes) / voxels);
+      }
     }
     std::sort(runs.begin(), runs.end());
     const double med = runs[1];
-    std::printf("threads %d: median %.3f s, %.2f M samples/s (%.2f M/s per thread), %.1f contributions/sample, %zu voxels\n",
-                threads, med, samples / med / 1e6, samples / med / 1e6 / threads, double(contributions) / samples, voxels);
+    std::printf("  threads %d: median %.3f s, %.2f M samples/s (%.2f M/s per thread), %.1f contributions/sample\n", threads,
+                med, samples / med / 1e6, samples / med / 1e6 / threads, double(contributions) / samples);
   }
 }

@@ -44,6 +44,7 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
   s.add("integrate.coarser_levels", &o.integrate.coarser_levels, "levels", "extra insertion into coarser levels");
   s.add("integrate.coarse_reach", &o.integrate.coarse_reach, "own ramps",
         "coarser-level ramps reach at most this many own ramps; 0 = paper (unbounded)");
+  s.add("integrate.behind", &o.integrate.behind, "ramps", "length of the ramp behind the surface, fraction of γ × cell");
   s.add("integrate.min_cosine", &o.integrate.min_cosine, "", "skip triangles seen more grazing than this");
   s.add("integrate.max_level", &o.integrate.max_level, "level", "deepest octree level");
   s.add("integrate.single_level", &o.integrate.single_level, "level",

@@ -9,6 +9,7 @@
 
 #include "engine/error.h"
 #include "engine/hsdf_math.h"
+#include "engine/integrate_kernel.h"
 
 namespace sf {
 
@@ -18,6 +19,7 @@ void IntegrateOptions::check() const {
   if (coarser_levels < 0 || coarser_levels > kMaxLevel)
     throw InputError("integrate.coarser_levels must be in 0.." + std::to_string(kMaxLevel));
   if (!(coarse_reach >= 0)) throw InputError("integrate.coarse_reach must be >= 0 (0 = unlimited)");
+  if (!(behind > 0 && behind <= 1)) throw InputError("integrate.behind must be in (0, 1]");
   if (!(min_cosine >= 0 && min_cosine < 1)) throw InputError("integrate.min_cosine must be in [0, 1)");
   if (max_level < 0 || max_level > kMaxLevel)
     throw InputError("integrate.max_level must be in 0.." + std::to_string(kMaxLevel));
@@ -35,10 +37,9 @@ namespace {
 
 using Eigen::Vector2d;
 using Eigen::Vector3d;
+using namespace integrate_detail;
 
-inline double cross2(const Vector2d& a, const Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
-
-// A triangle prepared for voxel queries.
+// A triangle prepared for the prism enumeration.
 struct PreparedTriangle {
   Vector3d P[3];
   Vector2d q[3];          // sensor-plane positions
@@ -47,25 +48,8 @@ struct PreparedTriangle {
   Vector3d dir[3];        // lines of sight through the vertices
   Vector3d side_normal[3];  // unit normals of the prism's side planes (plane e through edge e)
   double side_offset[3];
-  // Edge e joins local vertices lo[e], hi[e] (ordered by sample index, so the triangle on the
-  // other side computes bit-identical edge functions); side[e] = sign of the edge function at the
-  // opposite vertex, opp_value[e] its value.
-  int lo[3], hi[3];
-  double side[3], opp_value[3];
+  Ownership own;
   bool ok = false;
-
-  double edge_function(int e, const Vector2d& p) const { return cross2(q[hi[e]] - q[lo[e]], p - q[lo[e]]); }
-
-  // Barycentric coordinates of p if this triangle owns the line of sight through p.
-  bool owns(const Vector2d& p, double bary[3]) const {
-    for (int e = 0; e < 3; ++e) {
-      const double E = edge_function(e, p);
-      const double s = side[e] * E;
-      if (s < 0 || (E == 0 && side[e] < 0)) return false;
-      bary[e] = E / opp_value[e];  // edge e is opposite local vertex e
-    }
-    return true;
-  }
 };
 
 PreparedTriangle prepare(const DepthFrame& f, const FrameTriangle& t) {
@@ -75,13 +59,7 @@ PreparedTriangle prepare(const DepthFrame& f, const FrameTriangle& t) {
     p.P[k] = f.position[t[k]].cast<double>();
     p.q[k] = f.image_pos[t[k]].cast<double>();
   }
-  Vector3d n = (p.P[1] - p.P[0]).cross(p.P[2] - p.P[0]);
-  const double len = n.norm();
-  if (!(len > 0)) return p;
-  n /= len;
-  const Vector3d centroid = (p.P[0] + p.P[1] + p.P[2]) / 3.0;
-  if (n.dot(f.sensor.ray_direction(centroid)) > 0) n = -n;
-  p.normal = n;
+  if (!facing_normal(f.sensor, p.P, &p.normal)) return p;
   const Sensor& sensor = f.sensor;
   const bool perspective = sensor.kind == Sensor::Kind::Perspective;
   const Vector3d C = sensor.centre(), axis = sensor.axis();
@@ -96,17 +74,7 @@ PreparedTriangle prepare(const DepthFrame& f, const FrameTriangle& t) {
     p.side_normal[e] = m / mn;
     p.side_offset[e] = p.side_normal[e].dot(A);
   }
-  for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e
-    int a = (e + 1) % 3, b = (e + 2) % 3;
-    if (p.idx[a] > p.idx[b]) std::swap(a, b);
-    p.lo[e] = a;
-    p.hi[e] = b;
-    const double v = p.edge_function(e, p.q[e]);
-    if (v == 0 || !std::isfinite(v)) return p;  // degenerate in the sensor plane
-    p.opp_value[e] = v;
-    p.side[e] = v > 0 ? 1.0 : -1.0;
-  }
-  p.ok = true;
+  p.ok = p.own.init(p.q, p.idx);
   return p;
 }
 
@@ -123,9 +91,7 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
   const Vector3d centre = sensor.centre(), axis = sensor.axis();
   const Eigen::Matrix3d& R = sensor.R;
   const double h = root.cell_size(level);
-  double ramp = ramp_length(options.gamma, h);
-  if (level < level_of_triangle && options.coarse_reach > 0)
-    ramp = std::min(ramp, options.coarse_reach * ramp_length(options.gamma, root.cell_size(level_of_triangle)));
+  const double ramp = insertion_ramp(options, root, level, level_of_triangle);
   const double margin = 1e-3 * h;
 
   // The truncated prism swept by the lines of sight through the triangle, |distance| <= ramp,
@@ -182,8 +148,6 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
   index_range(bx, lo[bx], hi[bx], &b0, &b1);
   index_range(ax, lo[ax], hi[ax], &a0, &a1);
   if (b0 > b1 || a0 > a1) return;
-  const bool has_conf = !frame.confidence.empty();
-  const bool has_colour = !frame.colour.empty();
   Vector3d X;
   for (std::int64_t ib = b0; ib <= b1; ++ib) {
     // The hull's extent in c along this row.
@@ -213,7 +177,8 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
       base[ax] = root.min[ax];
       base[bx] = root.min[bx] + h * double(ib);
       base[cx] = root.min[cx] + h * double(ic);
-      double tmin = double(a0) * h, tmax = double(a1) * h;
+      // The column's bounds a0..a1 are applied in index space: a0 * h / h may round above a0.
+      double tmin = -INFINITY, tmax = INFINITY;
       bool empty = false;
       for (const HalfSpace& hs : planes) {
         const double v = hs.m.dot(base) - hs.k, ma = hs.m[ax];
@@ -226,6 +191,8 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
         }
       }
       if (empty || tmin > tmax) continue;
+      tmin = std::max(tmin, double(a0 - 1) * h);  // finite before the integer casts
+      tmax = std::min(tmax, double(a1 + 1) * h);
       const std::int64_t i0 = std::max<std::int64_t>(a0, std::int64_t(std::ceil(tmin / h)));
       const std::int64_t i1 = std::min<std::int64_t>(a1, std::int64_t(std::floor(tmax / h)));
       for (std::int64_t ia = i0; ia <= i1; ++ia) {
@@ -236,41 +203,25 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
         const Vector3d xs = R * X + sensor.t;
         if (perspective) {
           if (!(xs.z() > 0)) continue;
-          q = Vector2d(sensor.fx * xs.x() / xs.z() + sensor.cx, sensor.fy * xs.y() / xs.z() + sensor.cy);
+          q = pixel_of(sensor, xs);
         } else {
           q = xs.head<2>();
         }
         double bary[3];
-        if (!T.owns(q, bary)) continue;
+        if (!T.own.owns(T.q, q, bary)) continue;
         const Vector3d dir = perspective ? Vector3d((X - centre).normalized()) : axis;
-        const double cosine = T.normal.dot(dir);  // < 0: the normal faces the sensor
-        if (!(-cosine >= options.min_cosine)) continue;
-        const double distance = T.normal.dot(T.P[0] - X) / cosine;  // > 0: in front of the surface
-        if (!(std::abs(distance) <= ramp)) continue;
-        double conf = 1.0;
-        if (has_conf)
-          conf = bary[0] * frame.confidence[T.idx[0]] + bary[1] * frame.confidence[T.idx[1]] +
-                 bary[2] * frame.confidence[T.idx[2]];
-        const double weight = -cosine * tent_weight(distance, ramp) * conf;
-        if (!(weight > 0)) continue;
+        VoxelSample v;
+        if (!voxel_sample(frame, T.idx, T.normal, T.P[0], bary, X, dir, ramp, options, &v)) continue;
         Contribution c;
         std::int64_t idx[3];
         idx[ax] = ia;
         idx[bx] = ib;
         idx[cx] = ic;
         c.key = VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
-        c.distance = float(distance);
-        c.weight = float(weight);
-        c.has_colour = has_colour;
-        if (has_colour) {
-          for (int k = 0; k < 3; ++k) {
-            const double v = bary[0] * frame.colour[T.idx[0]][k] + bary[1] * frame.colour[T.idx[1]][k] +
-                             bary[2] * frame.colour[T.idx[2]][k];
-            c.colour[k] = std::uint8_t(std::clamp(std::lround(v), 0l, 255l));
-          }
-        } else {
-          c.colour[0] = c.colour[1] = c.colour[2] = 0;
-        }
+        c.distance = v.distance;
+        c.weight = v.weight;
+        c.has_colour = v.has_colour;
+        for (int k = 0; k < 3; ++k) c.colour[k] = v.colour[k];
         out.push_back(c);
       }
     }
@@ -285,8 +236,8 @@ void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, i
   if (T.ok) contributions_at_level(frame, T, level, level_of_triangle, root, options, out);
 }
 
-IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
-                               const RootCube& root, const IntegrateOptions& options, BrickMap& map) {
+IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
+                                      const RootCube& root, const IntegrateOptions& options, BrickMap& map) {
   IntegrateStats total;
   std::mutex stats_mutex;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 2048), [&](const tbb::blocked_range<std::size_t>& r) {
@@ -295,12 +246,8 @@ IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameT
     batch.reserve(r.size() * 16);
     for (std::size_t t = r.begin(); t != r.end(); ++t) {
       const FrameTriangle& tri = triangles[t];
-      const float footprint =
-          std::min({frame.footprint[tri[0]], frame.footprint[tri[1]], frame.footprint[tri[2]]});
-      if (!(footprint > 0)) continue;
-      const int lt = options.single_level >= 0 ? options.single_level
-                                               : triangle_level(root.size, options.lambda, footprint, options.max_level);
-      const int coarsest = options.single_level >= 0 ? lt : std::max(0, lt - options.coarser_levels);
+      int lt = 0, coarsest = 0;
+      if (!insertion_levels(frame, tri.data(), root, options, &lt, &coarsest)) continue;
       const std::size_t before = batch.size();
       const PreparedTriangle T = prepare(frame, tri);
       if (T.ok)
@@ -318,6 +265,13 @@ IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameT
     total.add(local);
   });
   return total;
+}
+
+IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
+                               const RootCube& root, const IntegrateOptions& options, BrickMap& map) {
+  IntegrateStats stats;
+  if (integrate_frame_projective(frame, triangles, root, options, map, &stats)) return stats;
+  return integrate_frame_prisms(frame, triangles, root, options, map);
 }
 
 }  // namespace sf

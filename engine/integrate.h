@@ -28,6 +28,10 @@ struct IntegrateOptions {
   // on a noisy synthetic bunny (σ = 0.5 footprint, γ = 8) whole-object F@10mm goes 0.79 -> 0.95
   // from reach 4 to reach 1.
   double coarse_reach = 1.0;
+  // Length of the ramp behind the surface, as a fraction of the ramp (1 = the paper's symmetric
+  // ramp). A shorter back ramp keeps a view's negative distances from reaching through thin parts
+  // of an object, where they cancel the other side's positive ones (phantom or lost surfaces).
+  double behind = 1.0;
   // Triangles whose normal is within acos(min_cosine) of perpendicular to the line of sight carry
   // almost no weight (angle term) and span long ramps; they are skipped.
   double min_cosine = 0.05;
@@ -46,8 +50,23 @@ struct IntegrateStats {
 };
 
 // Integrates one depth map into `map`. Runs parallel (tbb::parallel_for) in the calling arena.
+// Uses the voxel-centric enumeration when the frame allows it (a perspective pixel grid), else
+// the prism enumeration; both give the same field.
 IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
                                const RootCube& root, const IntegrateOptions& options, BrickMap& map);
+
+// The two enumerations, exposed for tests and benchmarks.
+// Prisms: per triangle and level, the voxels of the truncated prism its lines of sight sweep
+// (any sensor, any triangulation).
+IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
+                                      const RootCube& root, const IntegrateOptions& options, BrickMap& map);
+// Voxel-centric: per image tile and level, every voxel of the tile's frustum slab is projected
+// into the image and looked up in the pixel grid (perspective frames whose samples sit at pixel
+// centres and whose triangles each span one pixel quad). Returns false, touching nothing, when the
+// frame does not qualify.
+bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
+                                const RootCube& root, const IntegrateOptions& options, BrickMap& map,
+                                IntegrateStats* stats);
 
 // The contributions one triangle makes at one level (exposed for tests). `level_of_triangle` is
 // the level of equation 1, used to bound coarser-level ramps.

@@ -24,7 +24,7 @@ std::size_t BrickMap::brick_count() const {
 
 std::size_t BrickMap::voxel_count() const {
   std::size_t n = 0;
-  for (Brick* b : bricks()) b->voxels.for_each([&](VoxelKey, const VoxelData&) { ++n; });
+  for (Brick* b : bricks()) n += b->voxels.live_count();
   return n;
 }
 
@@ -37,10 +37,7 @@ Brick& BrickMap::brick(BrickCoord c) {
   }
   std::unique_lock lock(bricks_mutex_);
   auto& slot = bricks_[id];
-  if (!slot) {
-    slot = std::make_unique<Brick>();
-    slot->coord = c;
-  }
+  if (!slot) slot = std::make_unique<Brick>(c, brick_level_);
   return *slot;
 }
 
@@ -64,24 +61,21 @@ void BrickMap::apply(std::vector<Contribution>& batch) {
       current_id = bc.packed();
       lock = std::unique_lock<std::mutex>(current->mutex);
     }
-    VoxelData& v = current->voxels.find_or_insert(c.key);
-    // Equations 2-3 (Curless & Levoy): running weighted means.
-    const float W = v.weight + c.weight;
-    v.distance = (v.weight * v.distance + c.weight * c.distance) / W;
-    v.weight = W;
-    if (c.has_colour) {
-      const float Wc = v.colour_weight + c.weight;
-      for (int k = 0; k < 3; ++k) v.colour[k] = (v.colour_weight * v.colour[k] + c.weight * float(c.colour[k])) / Wc;
-      v.colour_weight = Wc;
-    }
+    accumulate(current->voxels.find_or_insert(c.key), c.distance, c.weight, c.has_colour ? c.colour : nullptr);
   }
+}
+
+BlockRef BrickMap::block(VoxelKey key) {
+  Brick& b = brick(brick_of(key, brick_level_));
+  std::lock_guard lock(b.mutex);
+  return b.voxels.block(key, true);
 }
 
 const VoxelData* BrickMap::find(VoxelKey key) const {
   const Brick* b = find_brick(brick_of(key, brick_level_));
   if (!b) return nullptr;
   const VoxelData* v = b->voxels.find(key);
-  return (v && !v->erased()) ? v : nullptr;
+  return (v && v->live()) ? v : nullptr;
 }
 
 VoxelData* BrickMap::find(VoxelKey key) {
@@ -106,7 +100,7 @@ void BrickMap::compact() {
   std::unique_lock lock(bricks_mutex_);
   for (auto it = bricks_.begin(); it != bricks_.end();) {
     it->second->voxels.compact();
-    if (it->second->voxels.size() == 0)
+    if (it->second->voxels.block_count() == 0)
       it = bricks_.erase(it);
     else
       ++it;

@@ -26,8 +26,9 @@ struct BrickCoord {
 BrickCoord brick_of(VoxelKey key, int brick_level);
 
 struct Brick {
+  explicit Brick(BrickCoord c, int brick_level) : coord(c), voxels(brick_level) {}
   BrickCoord coord;
-  std::mutex mutex;  // held while integrating into this brick
+  std::mutex mutex;  // held while creating blocks or applying contributions
   VoxelTable voxels;
 };
 
@@ -52,6 +53,11 @@ class BrickMap {
   // Each voxel must receive at most one contribution per depth map, and depth maps must be applied
   // in a fixed order: then the result does not depend on thread timing.
   void apply(std::vector<Contribution>& batch);
+
+  // The block holding `key`, created if absent. Safe to call from several threads at once; the
+  // returned pointer stays valid until compact() or clear(). Writers must never touch the same
+  // voxel concurrently (integration guarantees it: one contribution per voxel per depth map).
+  BlockRef block(VoxelKey key);
 
   const VoxelData* find(VoxelKey key) const;  // not safe concurrently with apply()
   VoxelData* find(VoxelKey key);

@@ -1,73 +1,95 @@
 #include "storage/voxel_table.h"
 
 #include <functional>
+#include <utility>
 
 namespace sf {
 
-std::size_t VoxelTable::slot_of(std::uint64_t key) const {
-  return std::hash<VoxelKey>{}(VoxelKey{key}) & (keys_.size() - 1);
+std::size_t VoxelTable::live_count() const {
+  std::size_t n = 0;
+  for_each([&](VoxelKey, const VoxelData&) { ++n; });
+  return n;
+}
+
+std::size_t VoxelTable::memory_bytes() const {
+  std::size_t n = blocks_.capacity() * sizeof(Block) + index_keys_.capacity() * 12;
+  for (const Block& b : blocks_) n += (std::size_t{1} << (3 * b.log)) * sizeof(VoxelData);
+  return n;
+}
+
+std::int64_t VoxelTable::find_slot(std::uint64_t origin) const {
+  if (index_keys_.empty()) return -1;
+  const std::size_t mask = index_keys_.size() - 1;
+  for (std::size_t i = std::hash<VoxelKey>{}(VoxelKey{origin}) & mask;; i = (i + 1) & mask) {
+    if (index_keys_[i] == origin) return index_pos_[i];
+    if (index_keys_[i] == kEmpty) return -1;
+  }
+}
+
+void VoxelTable::reindex(std::size_t capacity) {
+  index_keys_.assign(capacity, kEmpty);
+  index_pos_.assign(capacity, 0);
+  const std::size_t mask = capacity - 1;
+  for (std::size_t p = 0; p < blocks_.size(); ++p) {
+    std::size_t i = std::hash<VoxelKey>{}(blocks_[p].origin) & mask;
+    while (index_keys_[i] != kEmpty) i = (i + 1) & mask;
+    index_keys_[i] = blocks_[p].origin.bits;
+    index_pos_[i] = std::uint32_t(p);
+  }
+}
+
+BlockRef VoxelTable::block(VoxelKey key, bool create) {
+  const VoxelKey origin = block_origin(key);
+  const int log = block_log(key.level(), brick_level_);
+  const std::int64_t p = find_slot(origin.bits);
+  if (p >= 0) return {origin, log, blocks_[std::size_t(p)].voxels.get()};
+  if (!create) return {origin, log, nullptr};
+  Block b;
+  b.origin = origin;
+  b.log = log;
+  b.voxels = std::make_unique<VoxelData[]>(std::size_t{1} << (3 * log));
+  blocks_.push_back(std::move(b));
+  if ((blocks_.size() + 1) * 10 > index_keys_.size() * 7)
+    reindex(index_keys_.empty() ? 16 : index_keys_.size() * 2);
+  else {
+    const std::size_t mask = index_keys_.size() - 1;
+    std::size_t i = std::hash<VoxelKey>{}(origin) & mask;
+    while (index_keys_[i] != kEmpty) i = (i + 1) & mask;
+    index_keys_[i] = origin.bits;
+    index_pos_[i] = std::uint32_t(blocks_.size() - 1);
+  }
+  return {origin, log, blocks_.back().voxels.get()};
 }
 
 const VoxelData* VoxelTable::find(VoxelKey key) const {
-  if (keys_.empty()) return nullptr;
-  const std::size_t mask = keys_.size() - 1;
-  for (std::size_t i = slot_of(key.bits);; i = (i + 1) & mask) {
-    if (keys_[i] == key.bits) return &values_[i];
-    if (keys_[i] == kEmpty) return nullptr;
-  }
+  const std::int64_t p = find_slot(block_origin(key).bits);
+  if (p < 0) return nullptr;
+  const Block& b = blocks_[std::size_t(p)];
+  const VoxelData& v = BlockRef{b.origin, b.log, b.voxels.get()}.at(key);
+  return v.weight != 0 ? &v : nullptr;
 }
 
 VoxelData* VoxelTable::find(VoxelKey key) {
   return const_cast<VoxelData*>(static_cast<const VoxelTable*>(this)->find(key));
 }
 
-VoxelData& VoxelTable::find_or_insert(VoxelKey key, bool* created) {
-  if ((size_ + 1) * 10 > keys_.size() * 7) rehash(keys_.empty() ? 64 : keys_.size() * 2);
-  const std::size_t mask = keys_.size() - 1;
-  for (std::size_t i = slot_of(key.bits);; i = (i + 1) & mask) {
-    if (keys_[i] == key.bits) {
-      if (created) *created = false;
-      return values_[i];
-    }
-    if (keys_[i] == kEmpty) {
-      keys_[i] = key.bits;
-      values_[i] = VoxelData{};
-      ++size_;
-      if (created) *created = true;
-      return values_[i];
-    }
-  }
-}
-
-void VoxelTable::rehash(std::size_t new_capacity) {
-  std::vector<std::uint64_t> old_keys(new_capacity, kEmpty);
-  std::vector<VoxelData> old_values(new_capacity);
-  old_keys.swap(keys_);
-  old_values.swap(values_);
-  size_ = 0;
-  const std::size_t mask = keys_.size() - 1;
-  for (std::size_t j = 0; j < old_keys.size(); ++j) {
-    if (old_keys[j] == kEmpty || old_values[j].erased()) continue;
-    std::size_t i = slot_of(old_keys[j]);
-    while (keys_[i] != kEmpty) i = (i + 1) & mask;
-    keys_[i] = old_keys[j];
-    values_[i] = old_values[j];
-    ++size_;
-  }
-}
+VoxelData& VoxelTable::find_or_insert(VoxelKey key) { return block(key, true).at(key); }
 
 void VoxelTable::compact() {
-  std::size_t live = 0;
-  for_each([&](VoxelKey, VoxelData&) { ++live; });
-  if (live == 0) {
-    keys_.clear();
-    values_.clear();
-    size_ = 0;
-    return;
+  std::vector<Block> kept;
+  for (Block& b : blocks_) {
+    const std::size_t n = std::size_t{1} << (3 * b.log);
+    bool any = false;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (b.voxels[i].erased()) b.voxels[i] = VoxelData{};
+      any = any || b.voxels[i].live();
+    }
+    if (any) kept.push_back(std::move(b));
   }
-  std::size_t cap = 64;
-  while (live * 10 > cap * 7) cap *= 2;
-  rehash(cap);
+  blocks_ = std::move(kept);
+  std::size_t cap = 16;
+  while ((blocks_.size() + 1) * 10 > cap * 7) cap *= 2;
+  reindex(cap);
 }
 
 }  // namespace sf

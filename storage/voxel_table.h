@@ -1,8 +1,21 @@
 #pragma once
-// The voxels of one brick: an open-addressing hash table (linear probing) from VoxelKey to
-// VoxelData. ~32 bytes per slot at <= 70% load, against ~64+ for std::unordered_map, and one cache
-// miss per lookup. Erasure is lazy (see VoxelData::erased) and compact() rebuilds.
+// The voxels of one brick, stored as dense blocks of up to 8x8x8 voxels of one level.
+//
+// Integration touches voxels in bands a few cells thick, so neighbouring voxels are written
+// together: a dense block turns most of those writes into stores next to the previous one, where
+// a hash table of single voxels costs a random probe each (the reason session 1's integration was
+// memory-bound). A block index (open addressing) maps a block's origin key to its slot.
+//
+// Block shape: a block of level l holds 2^k voxels per axis with k = clamp(l - brick_level, 0, 3),
+// aligned to multiples of 2^k. A brick holds 2^(l - brick_level) voxels of level l per axis, so a
+// block never straddles two bricks; levels at or above the brick level get one-voxel blocks (there
+// are few such voxels).
+//
+// A voxel is absent while its weight is 0 (every contribution carries a positive weight), live
+// while it is > 0 and erased when < 0. Pointers to voxels stay valid until compact() or clear():
+// each block's voxels live in their own heap array.
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "storage/voxel_key.h"
@@ -12,48 +25,108 @@ namespace sf {
 // The hSDF sample of one voxel: cumulative weighted averages (equations 2-3 of the paper).
 struct VoxelData {
   float distance = 0;       // D: weighted mean signed distance, metres, positive in front
-  float weight = 0;         // W: accumulated weight (confidence); < 0 marks an erased voxel
+  float weight = 0;         // W: accumulated weight (confidence); 0 = absent, < 0 = erased
   float colour[3] = {0, 0, 0};  // weighted mean colour, 0..255
   float colour_weight = 0;  // weight of the contributions that carried colour
 
+  bool live() const { return weight > 0; }
   bool erased() const { return weight < 0; }
+};
+
+// Equations 2-3 (Curless & Levoy): adds one contribution (d, w > 0) to a voxel's running weighted
+// means; `colour` may be null (no colour).
+inline void accumulate(VoxelData& v, float distance, float weight, const std::uint8_t* colour) {
+  const float W = v.weight + weight;
+  v.distance = (v.weight * v.distance + weight * distance) / W;
+  v.weight = W;
+  if (colour) {
+    const float Wc = v.colour_weight + weight;
+    for (int k = 0; k < 3; ++k) v.colour[k] = (v.colour_weight * v.colour[k] + weight * float(colour[k])) / Wc;
+    v.colour_weight = Wc;
+  }
+}
+
+inline constexpr int kMaxBlockLog = 2;
+
+// log2 of a block's edge in voxels for `level` (see above).
+constexpr int block_log(int level, int brick_level) {
+  const int k = level - brick_level;
+  return k < 0 ? 0 : (k > kMaxBlockLog ? kMaxBlockLog : k);
+}
+
+// A block's voxels, addressed relative to its origin.
+struct BlockRef {
+  VoxelKey origin;
+  int log = 0;               // edge = 1 << log voxels
+  VoxelData* data = nullptr;  // (1 << 3 log) voxels, x fastest
+  VoxelData& at(VoxelKey k) const {
+    const std::uint32_t dx = k.x() - origin.x(), dy = k.y() - origin.y(), dz = k.z() - origin.z();
+    return data[(((dz << log) | dy) << log) | dx];
+  }
 };
 
 class VoxelTable {
  public:
-  VoxelTable() = default;
+  explicit VoxelTable(int brick_level) : brick_level_(brick_level) {}
 
-  std::size_t size() const { return size_; }  // slots in use, erased ones included until compact()
-  std::size_t capacity() const { return keys_.size(); }
+  int brick_level() const { return brick_level_; }
+  std::size_t block_count() const { return blocks_.size(); }
+  std::size_t live_count() const;        // live voxels (a scan)
+  std::size_t memory_bytes() const;      // blocks and index
 
+  // The origin of the block holding `key`.
+  VoxelKey block_origin(VoxelKey key) const {
+    const int log = block_log(key.level(), brick_level_);
+    const std::uint32_t m = ~((1u << log) - 1);
+    return VoxelKey::make(key.level(), key.x() & m, key.y() & m, key.z() & m);
+  }
+
+  // The block holding `key`; null data if absent and !create.
+  BlockRef block(VoxelKey key, bool create);
+
+  // The voxel if present (live or erased), else null.
   VoxelData* find(VoxelKey key);
   const VoxelData* find(VoxelKey key) const;
-  // Returns the voxel, creating a zero one if absent (then *created = true).
-  VoxelData& find_or_insert(VoxelKey key, bool* created = nullptr);
-  // Drops erased voxels and shrinks the table.
+  // The voxel, creating its block if needed (an absent voxel reads weight 0).
+  VoxelData& find_or_insert(VoxelKey key);
+  // Erased voxels become absent; blocks without live voxels are dropped.
   void compact();
 
-  // Visits every live (non-erased) voxel: f(VoxelKey, VoxelData&).
+  // Visits every live voxel: f(VoxelKey, VoxelData&), block by block.
   template <class F>
   void for_each(F&& f) {
-    for (std::size_t i = 0; i < keys_.size(); ++i)
-      if (keys_[i] != kEmpty && !values_[i].erased()) f(VoxelKey{keys_[i]}, values_[i]);
+    for (Block& b : blocks_) visit(b, f);
   }
   template <class F>
   void for_each(F&& f) const {
-    for (std::size_t i = 0; i < keys_.size(); ++i)
-      if (keys_[i] != kEmpty && !values_[i].erased()) f(VoxelKey{keys_[i]}, values_[i]);
+    for (const Block& b : blocks_) visit(b, f);
   }
 
  private:
-  // No valid key has all bits set (the two top bits are always zero).
-  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};
-  void rehash(std::size_t new_capacity);
-  std::size_t slot_of(std::uint64_t key) const;
+  struct Block {
+    VoxelKey origin;
+    int log = 0;
+    std::unique_ptr<VoxelData[]> voxels;
+  };
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};  // no valid key has all bits set
 
-  std::vector<std::uint64_t> keys_;
-  std::vector<VoxelData> values_;
-  std::size_t size_ = 0;
+  template <class B, class F>
+  static void visit(B& b, F& f) {
+    const std::uint32_t n = 1u << b.log;
+    std::size_t i = 0;
+    for (std::uint32_t z = 0; z < n; ++z)
+      for (std::uint32_t y = 0; y < n; ++y)
+        for (std::uint32_t x = 0; x < n; ++x, ++i)
+          if (b.voxels[i].live())
+            f(VoxelKey::make(b.origin.level(), b.origin.x() + x, b.origin.y() + y, b.origin.z() + z), b.voxels[i]);
+  }
+  std::int64_t find_slot(std::uint64_t origin) const;  // index into blocks_, or -1
+  void reindex(std::size_t capacity);
+
+  int brick_level_;
+  std::vector<Block> blocks_;
+  std::vector<std::uint64_t> index_keys_;  // open addressing: origin key -> position in blocks_
+  std::vector<std::uint32_t> index_pos_;
 };
 
 }  // namespace sf

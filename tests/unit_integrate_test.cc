@@ -7,6 +7,7 @@
 #include <set>
 
 #include "engine/depth_frame.h"
+#include "engine/error.h"
 #include "engine/hsdf_math.h"
 #include "engine/integrate.h"
 #include "engine/triangulate.h"
@@ -269,6 +270,109 @@ TEST(Integrate, PrismEnumerationMatchesBruteForce) {
     EXPECT_GT(expected, 20u) << "level " << level;
     EXPECT_EQ(missed, 0u) << "level " << level << " of " << expected;
   }
+}
+
+}  // namespace sf
+
+namespace sf {
+
+// The voxel-centric enumeration must give the very field the prism enumeration gives: the same
+// voxels with bit-identical distances, weights and colours. The scene is made to stress it: an
+// oblique camera over a wavy surface with a depth step (dropped triangles, levels changing across
+// tiles), confidences and colours, several levels and a tile size that does not divide the image.
+TEST(Integrate, VoxelCentricEnumerationEqualsPrisms) {
+  DepthFrame f;
+  f.name = "wavy";
+  f.width = 37;
+  f.height = 29;
+  f.sensor.fx = 30;
+  f.sensor.fy = 33;
+  f.sensor.cx = 18.2;
+  f.sensor.cy = 14.9;
+  const Eigen::Vector3d C(0.31, -0.23, 0.07);
+  const Eigen::Vector3d z = Eigen::Vector3d(0.45, 0.6, 1).normalized(), x = Eigen::Vector3d::UnitY().cross(z).normalized();
+  f.sensor.R.row(0) = x;
+  f.sensor.R.row(1) = z.cross(x);
+  f.sensor.R.row(2) = z;
+  f.sensor.t = -f.sensor.R * C;
+  std::vector<float> depth(f.size());
+  for (int r = 0; r < f.height; ++r)
+    for (int c = 0; c < f.width; ++c)
+      depth[r * f.width + c] = float(1.2 + 0.03 * c + 0.05 * std::sin(0.7 * r) + (c > 22 ? 0.5 : 0.0));
+  depth[5 * f.width + 7] = 0;  // a hole
+  fill_perspective_samples(f, depth, false);
+  f.confidence.resize(f.size());
+  f.colour.resize(f.size());
+  for (std::size_t i = 0; i < f.size(); ++i) {
+    f.confidence[i] = float(0.5 + 0.5 * std::cos(0.1 * double(i)));
+    f.colour[i] = {std::uint8_t(i % 256), std::uint8_t((7 * i) % 256), std::uint8_t((13 * i) % 256)};
+  }
+  const auto tris = triangulate(f, {});
+  const RootCube root{Eigen::Vector3d(-1, -1, 0), 3.3};
+  for (double gamma : {2.0, 6.0}) {
+    IntegrateOptions opt;
+    opt.gamma = gamma;
+    opt.coarser_levels = 3;
+    BrickMap prisms(2), projective(3);
+    const IntegrateStats a = integrate_frame_prisms(f, tris, root, opt, prisms);
+    IntegrateStats b;
+    ASSERT_TRUE(integrate_frame_projective(f, tris, root, opt, projective, &b));
+    EXPECT_EQ(a.triangles, b.triangles);
+    EXPECT_EQ(a.contributions, b.contributions);
+    ASSERT_GT(a.contributions, 1000u);
+    std::size_t compared = 0, levels = 0;
+    std::set<int> seen_levels;
+    for (Brick* br : prisms.bricks())
+      br->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+        const VoxelData* w = projective.find(k);
+        ASSERT_NE(w, nullptr) << "level " << k.level() << " voxel " << k.x() << "," << k.y() << "," << k.z();
+        EXPECT_EQ(v.distance, w->distance);
+        EXPECT_EQ(v.weight, w->weight);
+        for (int c = 0; c < 3; ++c) EXPECT_EQ(v.colour[c], w->colour[c]);
+        seen_levels.insert(k.level());
+        ++compared;
+      });
+    levels = seen_levels.size();
+    EXPECT_EQ(compared, projective.voxel_count());
+    EXPECT_GE(levels, 4u);
+  }
+}
+
+// Frames the voxel-centric path cannot index fall back to prisms and are still integrated.
+TEST(Integrate, OrthographicFramesUseThePrismPath) {
+  DepthFrame f = plane_frame(2.0, 6);
+  f.sensor.kind = Sensor::Kind::Orthographic;
+  BrickMap map(2);
+  IntegrateStats st;
+  EXPECT_FALSE(integrate_frame_projective(f, triangulate(f, {}), test_root(), {}, map, &st));
+  EXPECT_EQ(map.voxel_count(), 0u);
+}
+
+}  // namespace sf
+
+namespace sf {
+
+// A shorter ramp behind the surface (integrate.behind): on the plane z = 2 at level 7 (cell 2 cm,
+// ramp 8 cm), behind = 0.5 leaves the front untouched and cuts the back at 4 cm, with the tent
+// falling over those 4 cm.
+TEST(Integrate, ShorterRampBehindTheSurface) {
+  const DepthFrame f = plane_frame(2.0);
+  IntegrateOptions opt;
+  opt.gamma = 4;
+  opt.coarser_levels = 0;
+  opt.behind = 0.5;
+  BrickMap map(2);
+  integrate_frame(f, triangulate(f, {}), test_root(), opt, map);
+  const VoxelData* v = map.find(VoxelKey::make(7, 50, 50, 48));  // 4 cm in front: as before
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  v = map.find(VoxelKey::make(7, 50, 50, 51));  // 2 cm behind: 1 - 2/4
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->distance, -0.02, 1e-6);
+  EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  EXPECT_EQ(map.find(VoxelKey::make(7, 50, 50, 52)), nullptr);  // 4 cm behind: the back ramp's end
+  opt.behind = 0;
+  EXPECT_THROW(opt.check(), InputError);
 }
 
 }  // namespace sf

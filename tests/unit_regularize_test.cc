@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <set>
+
 namespace sf {
 namespace {
 void put(BrickMap& m, VoxelKey k, float d, float w) {
@@ -77,13 +79,36 @@ TEST(BrickMap, BrickOfVoxelsOfAllLevels) {
   EXPECT_EQ(brick_of(VoxelKey::make(1, 1, 0, 0), 2).x, 2u);   // coarse voxel at the middle
 }
 
+TEST(VoxelTable, BlockShapeFollowsTheBrickLevel) {
+  // Brick level 4: level 4 and coarser get single voxels, level 5 2^3 blocks, level 6 and finer
+  // 4^3 blocks (never straddling a brick: a brick holds 2^(l - 4) voxels of level l per axis).
+  EXPECT_EQ(block_log(2, 4), 0);
+  EXPECT_EQ(block_log(4, 4), 0);
+  EXPECT_EQ(block_log(5, 4), 1);
+  EXPECT_EQ(block_log(6, 4), 2);
+  EXPECT_EQ(block_log(12, 4), kMaxBlockLog);
+  VoxelTable t(4);
+  EXPECT_EQ(t.block_origin(VoxelKey::make(9, 13, 6, 7)), VoxelKey::make(9, 12, 4, 4));
+  EXPECT_EQ(t.block_origin(VoxelKey::make(5, 13, 6, 7)), VoxelKey::make(5, 12, 6, 6));
+  t.find_or_insert(VoxelKey::make(9, 13, 6, 7)).weight = 2;
+  EXPECT_EQ(t.block_count(), 1u);
+  EXPECT_EQ(t.find(VoxelKey::make(9, 12, 6, 7)), nullptr);  // same block, never written: absent
+  ASSERT_NE(t.find(VoxelKey::make(9, 13, 6, 7)), nullptr);
+  EXPECT_EQ(t.live_count(), 1u);
+}
+
 TEST(VoxelTable, GrowsFindsAndCompacts) {
-  VoxelTable t;
+  VoxelTable t(4);
   for (std::uint32_t i = 0; i < 1000; ++i) t.find_or_insert(VoxelKey::make(10, i, i % 7, 3)).weight = float(i + 1);
-  EXPECT_EQ(t.size(), 1000u);
+  EXPECT_EQ(t.live_count(), 1000u);
+  // Level 10 with brick level 4: blocks of 4^3 voxels, so x = 0..999 spans 250 blocks, and y = 0..6
+  // two: the 250 x-blocks over (i % 7) < 4 or >= 4 give 250 + (blocks holding both) in total.
+  std::set<std::pair<std::uint32_t, std::uint32_t>> blocks;
+  for (std::uint32_t i = 0; i < 1000; ++i) blocks.insert({i / 4, (i % 7) / 4});
+  EXPECT_EQ(t.block_count(), blocks.size());
   for (std::uint32_t i = 0; i < 1000; i += 2) t.find(VoxelKey::make(10, i, i % 7, 3))->weight = -1;
   t.compact();
-  EXPECT_EQ(t.size(), 500u);
+  EXPECT_EQ(t.live_count(), 500u);
   EXPECT_EQ(t.find(VoxelKey::make(10, 2, 2, 3)), nullptr);
   ASSERT_NE(t.find(VoxelKey::make(10, 3, 3, 3)), nullptr);
   EXPECT_FLOAT_EQ(t.find(VoxelKey::make(10, 3, 3, 3))->weight, 4.0f);

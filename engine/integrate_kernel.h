@@ -1,0 +1,131 @@
+#pragma once
+// The per-voxel arithmetic of section 5 shared by both ways of finding a triangle's voxels
+// (prisms per triangle, engine/integrate.cc; voxel-centric per image tile,
+// engine/integrate_projective.cc). Both must decide ownership and compute distances with the very
+// same operations, so that the two enumerations give bit-identical fields.
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include "engine/depth_frame.h"
+#include "engine/hsdf_math.h"
+#include "engine/integrate.h"
+
+namespace sf::integrate_detail {
+
+inline double cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
+
+// Pixel coordinates of camera-frame point xs (z > 0), one division for both axes. Both
+// enumerations project with this, so their ownership decisions agree bit for bit.
+inline Eigen::Vector2d pixel_of(const Sensor& s, const Eigen::Vector3d& xs) {
+  const double iz = 1.0 / xs.z();
+  return {s.fx * xs.x() * iz + s.cx, s.fy * xs.y() * iz + s.cy};
+}
+
+// Ownership of lines of sight by a triangle in the sensor plane. Edge e joins local vertices
+// lo[e], hi[e], ordered by sample index, so the triangle on the other side of the edge evaluates a
+// bit-identical edge function and exactly one of the two owns each point of the edge.
+struct Ownership {
+  std::uint8_t lo[3], hi[3];
+  double opp[3];  // edge function of edge e at the opposite vertex e (never 0)
+
+  static double edge(const Eigen::Vector2d q[3], int lo, int hi, const Eigen::Vector2d& p) {
+    return cross2(q[hi] - q[lo], p - q[lo]);
+  }
+  // Sets lo/hi/opp; false if the triangle is degenerate in the sensor plane.
+  bool init(const Eigen::Vector2d q[3], const std::uint32_t idx[3]) {
+    for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e
+      int a = (e + 1) % 3, b = (e + 2) % 3;
+      if (idx[a] > idx[b]) std::swap(a, b);
+      lo[e] = std::uint8_t(a);
+      hi[e] = std::uint8_t(b);
+      const double v = edge(q, a, b, q[e]);
+      if (v == 0 || !std::isfinite(v)) return false;
+      opp[e] = v;
+    }
+    return true;
+  }
+  // Barycentric coordinates of p if the triangle owns the line of sight through p.
+  bool owns(const Eigen::Vector2d q[3], const Eigen::Vector2d& p, double bary[3]) const {
+    for (int e = 0; e < 3; ++e) {
+      const double E = edge(q, lo[e], hi[e], p);
+      const bool positive_side = opp[e] > 0;
+      if (positive_side ? E < 0 : (E > 0 || E == 0)) return false;
+      bary[e] = E / opp[e];
+    }
+    return true;
+  }
+};
+
+// The unit normal of triangle (P0, P1, P2), turned to face the sensor; false if degenerate.
+inline bool facing_normal(const Sensor& sensor, const Eigen::Vector3d P[3], Eigen::Vector3d* normal) {
+  Eigen::Vector3d n = (P[1] - P[0]).cross(P[2] - P[0]);
+  const double len = n.norm();
+  if (!(len > 0)) return false;
+  n /= len;
+  const Eigen::Vector3d centroid = (P[0] + P[1] + P[2]) / 3.0;
+  if (n.dot(sensor.ray_direction(centroid)) > 0) n = -n;
+  *normal = n;
+  return true;
+}
+
+// The ramp of a triangle of level `level_of_triangle` inserted at `level` (<= it).
+inline double insertion_ramp(const IntegrateOptions& o, const RootCube& root, int level, int level_of_triangle) {
+  double ramp = ramp_length(o.gamma, root.cell_size(level));
+  if (level < level_of_triangle && o.coarse_reach > 0)
+    ramp = std::min(ramp, o.coarse_reach * ramp_length(o.gamma, root.cell_size(level_of_triangle)));
+  return ramp;
+}
+
+// Level of equation 1 and the coarsest insertion level of a triangle; false if it is not inserted.
+inline bool insertion_levels(const DepthFrame& f, const std::uint32_t idx[3], const RootCube& root,
+                             const IntegrateOptions& o, int* level, int* coarsest) {
+  const float footprint = std::min({f.footprint[idx[0]], f.footprint[idx[1]], f.footprint[idx[2]]});
+  if (!(footprint > 0)) return false;
+  if (o.single_level >= 0) {
+    *level = *coarsest = o.single_level;
+    return true;
+  }
+  *level = triangle_level(root.size, o.lambda, footprint, o.max_level);
+  *coarsest = std::max(0, *level - o.coarser_levels);
+  return true;
+}
+
+// Signed distance and weight of the voxel at X, whose line of sight the triangle (normal, P0)
+// owns with barycentric coordinates `bary`; false if the voxel gets nothing. `dir` is the unit line
+// of sight through X.
+struct VoxelSample {
+  float distance, weight;
+  std::uint8_t colour[3];
+  bool has_colour;
+};
+inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Eigen::Vector3d& normal,
+                         const Eigen::Vector3d& P0, const double bary[3], const Eigen::Vector3d& X,
+                         const Eigen::Vector3d& dir, double ramp, const IntegrateOptions& options, VoxelSample* out) {
+  const double cosine = normal.dot(dir);  // < 0: the normal faces the sensor
+  if (!(-cosine >= options.min_cosine)) return false;
+  const double distance = normal.dot(P0 - X) / cosine;  // > 0: in front of the surface
+  if (distance < 0) ramp *= options.behind;  // the ramp behind the surface may be shorter
+  if (!(std::abs(distance) <= ramp)) return false;
+  double conf = 1.0;
+  if (!frame.confidence.empty())
+    conf = bary[0] * frame.confidence[idx[0]] + bary[1] * frame.confidence[idx[1]] + bary[2] * frame.confidence[idx[2]];
+  const double weight = -cosine * tent_weight(distance, ramp) * conf;
+  if (!(weight > 0)) return false;
+  out->distance = float(distance);
+  out->weight = float(weight);
+  out->has_colour = !frame.colour.empty();
+  if (out->has_colour) {
+    for (int k = 0; k < 3; ++k) {
+      const double v = bary[0] * frame.colour[idx[0]][k] + bary[1] * frame.colour[idx[1]][k] +
+                       bary[2] * frame.colour[idx[2]][k];
+      out->colour[k] = std::uint8_t(std::clamp(std::lround(v), 0l, 255l));
+    }
+  } else {
+    out->colour[0] = out->colour[1] = out->colour[2] = 0;
+  }
+  return true;
+}
+
+}  // namespace sf::integrate_detail

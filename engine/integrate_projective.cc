@@ -1,0 +1,362 @@
+// Voxel-centric insertion of a perspective depth map (section 5), the fast path of integration.
+//
+// The prism enumeration (integrate.cc) pays a set-up per triangle and level; at coarser levels a
+// triangle reaches a voxel or two, so that set-up dominates. Here the image is cut into tiles of
+// kTile x kTile pixel quads. For each tile and level, the voxels that can receive anything lie in
+// the tile's frustum between the nearest and farthest camera depth of its triangles, widened by
+// their ramps (a voxel at ray distance d from a triangle differs from it in camera depth by at
+// most |d|). Each such voxel is projected into the image; the pixel quad it falls in holds the
+// (at most two) triangles that may own its line of sight, and ownership is decided by the same
+// edge functions as in the prism path. A voxel belongs to the tile of its quad, so every voxel is
+// evaluated once per level and depth map; ownership gives it at most one contribution, so tiles
+// write their voxels concurrently without locks (blocks are created under their brick's lock).
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <functional>
+#include <limits>
+
+#include "engine/integrate.h"
+#include "engine/integrate_kernel.h"
+
+namespace sf {
+namespace {
+
+using Eigen::Vector2d;
+using Eigen::Vector3d;
+using namespace integrate_detail;
+
+constexpr int kTile = 8;  // pixel quads per tile side
+
+struct GridTriangle {
+  Vector3d normal;     // unit, facing the sensor
+  Ownership own;
+  std::uint32_t idx[3];
+  std::int8_t level = -1;  // level of equation 1; -1: not inserted
+  std::int8_t coarsest = 0;
+  bool ok = false;         // non-degenerate (inserted with contributions)
+};
+
+// Bounds of one tile's prisms at one level: camera depth, and offset along the tile's mean
+// normal (for a tilted surface the depth range of a tile exceeds its ramp many times over, while
+// its prisms stay within a slab about 2 ramps thick along the normal).
+struct TileLevel {
+  double zmin = std::numeric_limits<double>::infinity(), zmax = -std::numeric_limits<double>::infinity();
+  double smin = std::numeric_limits<double>::infinity(), smax = -std::numeric_limits<double>::infinity();
+  double ramp = 0;
+};
+
+// The triangles of one pixel quad. With two, `dx, dy` (each +-1) point from the second's vertex
+// off the shared diagonal to the first's: a point q of the quad lies in the first iff
+// (q - quad centre) . (dx, dy) > 0, a cheap guess that the exact edge-function test then confirms.
+struct Quad {
+  std::int32_t tri[2] = {-1, -1};
+  std::int8_t dx = 0, dy = 0;
+};
+
+// floor() without a libm call (baseline x86-64 has no rounding instruction); |x| < 2^31.
+inline int fast_floor(double x) {
+  const int i = int(x);
+  return i - (double(i) > x ? 1 : 0);
+}
+
+// Per-task cache of recently written blocks (direct mapped), so that the brick lock and the
+// block index are consulted once per block rather than once per voxel.
+class BlockCache {
+ public:
+  explicit BlockCache(BrickMap& map) : map_(map) {}
+  VoxelData& voxel(VoxelKey key, VoxelKey origin) {
+    BlockRef& b = slots_[std::hash<VoxelKey>{}(origin) & (kSlots - 1)];
+    if (!b.data || b.origin != origin) b = map_.block(key);
+    return b.at(key);
+  }
+
+ private:
+  static constexpr std::size_t kSlots = 256;
+  BrickMap& map_;
+  BlockRef slots_[kSlots];
+};
+
+struct HalfSpace {  // m . X >= k
+  Vector3d m;
+  double k;
+};
+
+bool is_pixel_centre(const DepthFrame& f, std::uint32_t i) {
+  const std::uint32_t w = std::uint32_t(f.width);
+  const Eigen::Vector2f& p = f.image_pos[i];
+  return p.x() == float(i % w) + 0.5f && p.y() == float(i / w) + 0.5f;
+}
+
+}  // namespace
+
+bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
+                                const RootCube& root, const IntegrateOptions& options, BrickMap& map,
+                                IntegrateStats* stats_out) {
+  const Sensor& sensor = frame.sensor;
+  if (sensor.kind != Sensor::Kind::Perspective || frame.width < 2 || frame.height < 2) return false;
+  const int W = frame.width, QW = frame.width - 1, QH = frame.height - 1;
+  // Pixel quad -> its triangles (two slots). Any triangle not within one quad, or any sample off
+  // its pixel centre, sends the frame to the prism path.
+  std::vector<Quad> quad(std::size_t(QW) * std::size_t(QH));
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    const FrameTriangle& tri = triangles[t];
+    int r0 = frame.height, c0 = W, r1 = -1, c1 = -1;
+    for (std::uint32_t i : tri) {
+      if (i >= frame.size() || !is_pixel_centre(frame, i)) return false;
+      const int r = int(i / std::uint32_t(W)), c = int(i % std::uint32_t(W));
+      r0 = std::min(r0, r), r1 = std::max(r1, r), c0 = std::min(c0, c), c1 = std::max(c1, c);
+    }
+    if (r1 - r0 > 1 || c1 - c0 > 1 || r0 >= QH || c0 >= QW) return false;
+    Quad& qd = quad[std::size_t(r0) * QW + c0];
+    if (qd.tri[0] < 0) {
+      qd.tri[0] = std::int32_t(t);
+    } else if (qd.tri[1] < 0) {
+      qd.tri[1] = std::int32_t(t);
+      // Each triangle's vertex that the other lacks.
+      auto lone = [&](const FrameTriangle& a, const FrameTriangle& b) {
+        for (std::uint32_t i : a)
+          if (i != b[0] && i != b[1] && i != b[2]) return i;
+        return a[0];
+      };
+      const std::uint32_t a = lone(triangles[qd.tri[0]], tri), b = lone(tri, triangles[qd.tri[0]]);
+      qd.dx = std::int8_t(int(a % std::uint32_t(W)) - int(b % std::uint32_t(W)));
+      qd.dy = std::int8_t(int(a / std::uint32_t(W)) - int(b / std::uint32_t(W)));
+    } else {
+      return false;
+    }
+  }
+
+  IntegrateStats stats;
+  std::vector<GridTriangle> tris(triangles.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t t = r.begin(); t != r.end(); ++t) {
+      GridTriangle& g = tris[t];
+      for (int k = 0; k < 3; ++k) g.idx[k] = triangles[t][k];
+      int lt = 0, coarsest = 0;
+      if (!insertion_levels(frame, g.idx, root, options, &lt, &coarsest)) continue;
+      g.level = std::int8_t(lt);
+      g.coarsest = std::int8_t(coarsest);
+      Vector3d P[3];
+      Vector2d q[3];
+      for (int k = 0; k < 3; ++k) {
+        P[k] = frame.position[g.idx[k]].cast<double>();
+        q[k] = frame.image_pos[g.idx[k]].cast<double>();
+      }
+      g.ok = facing_normal(sensor, P, &g.normal) && g.own.init(q, g.idx);
+    }
+  });
+  for (const GridTriangle& g : tris)
+    if (g.level >= 0) {
+      ++stats.triangles;
+      ++stats.triangles_per_level[g.level];
+    }
+
+  // Per tile and level: bounds of the prisms of the triangles inserted there.
+  const int TX = (QW + kTile - 1) / kTile, TY = (QH + kTile - 1) / kTile;
+  constexpr int L = kMaxLevel + 1;
+  std::vector<TileLevel> tile_levels(std::size_t(TX) * TY * L);
+  std::vector<Vector3d> tile_normal(std::size_t(TX) * TY);
+  const Eigen::Matrix3d& R = sensor.R;
+  const Vector3d centre = sensor.centre();
+  tbb::parallel_for(0, TX * TY, [&](int tile) {
+    const int tx = tile % TX, ty = tile / TX;
+    TileLevel* tl = &tile_levels[std::size_t(tile) * L];
+    // The quads of the tile, plus the column to its left and the row above: a voxel on the
+    // tile's left or top border may belong to a triangle there (see the owner lookup below).
+    const int qr0 = std::max(0, ty * kTile - 1), qr1 = std::min(QH, (ty + 1) * kTile);
+    const int qc0 = std::max(0, tx * kTile - 1), qc1 = std::min(QW, (tx + 1) * kTile);
+    auto for_each_triangle = [&](auto&& f) {
+      for (int r = qr0; r < qr1; ++r)
+        for (int c = qc0; c < qc1; ++c)
+          for (std::int32_t t : quad[std::size_t(r) * QW + c].tri)
+            if (t >= 0 && tris[t].ok) f(tris[t]);
+    };
+    Vector3d n = Vector3d::Zero();
+    for_each_triangle([&](const GridTriangle& g) { n += g.normal; });
+    if (!(n.norm() > 1e-6)) n = Vector3d::UnitZ();  // any direction is a valid bound
+    n.normalize();
+    tile_normal[tile] = n;
+    for_each_triangle([&](const GridTriangle& g) {
+      double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin;
+      double s[3], sd[3];  // offset along n of each vertex and of its line of sight
+      for (int k = 0; k < 3; ++k) {
+        const Vector3d P = frame.position[g.idx[k]].cast<double>();
+        const double z = R.row(2).dot(P) + sensor.t.z();
+        zmin = std::min(zmin, z);
+        zmax = std::max(zmax, z);
+        s[k] = n.dot(P);
+        sd[k] = std::abs(n.dot((P - centre).normalized()));
+      }
+      for (int l = g.coarsest; l <= g.level; ++l) {
+        const double ramp = insertion_ramp(options, root, l, g.level);
+        TileLevel& t = tl[l];
+        t.zmin = std::min(t.zmin, zmin);
+        t.zmax = std::max(t.zmax, zmax);
+        t.ramp = std::max(t.ramp, ramp);
+        for (int k = 0; k < 3; ++k) {
+          t.smin = std::min(t.smin, s[k] - ramp * sd[k]);
+          t.smax = std::max(t.smax, s[k] + ramp * sd[k]);
+        }
+      }
+    });
+  });
+  struct Item {
+    int tile, level;
+  };
+  std::vector<Item> items;
+  for (int tile = 0; tile < TX * TY; ++tile)
+    for (int l = 0; l < L; ++l)
+      if (tile_levels[std::size_t(tile) * L + l].zmin <= tile_levels[std::size_t(tile) * L + l].zmax)
+        items.push_back({tile, l});
+
+  const Eigen::Matrix3d Rt = R.transpose();
+  const int brick_level = map.brick_level();
+  std::atomic<std::size_t> contributions{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, items.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::size_t local = 0;
+    BlockCache cache(map);
+    for (std::size_t it = range.begin(); it != range.end(); ++it) {
+      const int level = items[it].level, tile = items[it].tile;
+      const int tx = tile % TX, ty = tile / TX;
+      const int c0 = tx * kTile, c1 = std::min(QW, c0 + kTile), r0 = ty * kTile, r1 = std::min(QH, r0 + kTile);
+      const TileLevel& tl = tile_levels[std::size_t(tile) * L + level];
+      const double h = root.cell_size(level);
+      const double margin = 1e-3 * h;
+      double ramp_of[L];  // by the owner's level
+      for (int lt = level; lt < L; ++lt) ramp_of[lt] = insertion_ramp(options, root, level, lt);
+      // The tile's frustum slab as half-spaces a . x_cam + b >= 0, moved to world coordinates.
+      const double pm = 1e-3;  // pixels
+      const double u0 = c0 + 0.5 - pm, u1 = c1 + 0.5 + pm, v0 = r0 + 0.5 - pm, v1 = r1 + 0.5 + pm;
+      const double zlo = std::max(tl.zmin - tl.ramp - margin, 1e-9), zhi = tl.zmax + tl.ramp + margin;
+      const Vector3d a_cam[6] = {{sensor.fx, 0, sensor.cx - u0}, {-sensor.fx, 0, u1 - sensor.cx},
+                                 {0, sensor.fy, sensor.cy - v0}, {0, -sensor.fy, v1 - sensor.cy},
+                                 {0, 0, 1},                      {0, 0, -1}};
+      const double b_cam[6] = {0, 0, 0, 0, -zlo, zhi};
+      HalfSpace planes[8];
+      for (int k = 0; k < 6; ++k) {
+        const Vector3d m = Rt * a_cam[k];
+        planes[k] = {m, -(a_cam[k].dot(sensor.t) + b_cam[k])};
+      }
+      // Along the tile normal: the prisms lie within the hull of their corners P +- ramp dir,
+      // up to the bulge of a perspective cap (ramp x (pixel angle)^2 / 8, far below the margin).
+      const Vector3d& tn = tile_normal[tile];
+      planes[6] = {tn, tl.smin - margin};
+      planes[7] = {-tn, -tl.smax - margin};
+      Vector3d lo = Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+      for (int k = 0; k < 8; ++k) {
+        const double u = (k & 1) ? u1 : u0, v = (k & 2) ? v1 : v0, z = (k & 4) ? zhi : zlo;
+        const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
+        const Vector3d X = Rt * (xc - sensor.t);
+        lo = lo.cwiseMin(X);
+        hi = hi.cwiseMax(X);
+      }
+      // March along the world axis closest to the tile's central line of sight.
+      const double uc = 0.5 * (u0 + u1), vc = 0.5 * (v0 + v1);
+      const Vector3d ray = Rt * Vector3d((uc - sensor.cx) / sensor.fx, (vc - sensor.cy) / sensor.fy, 1.0);
+      int ax = 0;
+      ray.cwiseAbs().maxCoeff(&ax);
+      const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
+      const double pad = margin;
+      const std::int64_t n_cells = std::int64_t{1} << level;
+      auto index_range = [&](int axis_id, double a, double b, std::int64_t* i0, std::int64_t* i1) {
+        *i0 = std::max<std::int64_t>(0, std::int64_t(std::ceil((a - pad - root.min[axis_id]) / h)));
+        *i1 = std::min<std::int64_t>(n_cells, std::int64_t(std::floor((b + pad - root.min[axis_id]) / h)));
+      };
+      std::int64_t a0, a1, b0, b1, cc0, cc1;
+      index_range(ax, lo[ax], hi[ax], &a0, &a1);
+      index_range(bx, lo[bx], hi[bx], &b0, &b1);
+      index_range(cx, lo[cx], hi[cx], &cc0, &cc1);
+      const std::uint32_t block_mask = ~((1u << block_log(level, brick_level)) - 1);
+      for (std::int64_t ib = b0; ib <= b1; ++ib)
+        for (std::int64_t ic = cc0; ic <= cc1; ++ic) {
+          Vector3d base;
+          base[ax] = root.min[ax];
+          base[bx] = root.min[bx] + h * double(ib);
+          base[cx] = root.min[cx] + h * double(ic);
+          double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // a0..a1 in index space
+          bool empty = false;
+          for (const HalfSpace& hs : planes) {
+            const double v = hs.m.dot(base) - hs.k, ma = hs.m[ax];
+            if (ma == 0) {
+              if (v < 0) {
+                empty = true;
+                break;
+              }
+            } else if (ma > 0) {
+              tmin = std::max(tmin, -v / ma);
+            } else {
+              tmax = std::min(tmax, -v / ma);
+            }
+          }
+          if (empty || tmin > tmax) continue;
+          tmin = std::max(tmin, double(a0 - 1) * h);  // finite before the integer casts
+          tmax = std::min(tmax, double(a1 + 1) * h);
+          const std::int64_t i0 = std::max<std::int64_t>(a0, std::int64_t(std::ceil(tmin / h)));
+          const std::int64_t i1 = std::min<std::int64_t>(a1, std::int64_t(std::floor(tmax / h)));
+          for (std::int64_t ia = i0; ia <= i1; ++ia) {
+            Vector3d X = base;
+            X[ax] += h * double(ia);
+            const Vector3d xs = R * X + sensor.t;
+            if (!(xs.z() > 0)) continue;
+            const Vector2d q = pixel_of(sensor, xs);
+            const int col = fast_floor(q.x() - 0.5), row = fast_floor(q.y() - 0.5);
+            if (!(col >= c0 && col < c1 && row >= r0 && row < r1)) continue;  // another tile's voxel
+            // The owner: one of the quad's triangles (the likelier first), or, on the quad's left
+            // or top border, one of the neighbouring quads' (edge functions give a shared edge to
+            // one side only).
+            const GridTriangle* owner = nullptr;
+            double bary[3] = {0, 0, 0};
+            auto try_triangle = [&](std::int32_t t) {
+              if (t < 0 || !tris[t].ok) return false;
+              const GridTriangle& g = tris[t];
+              const Vector2d qv[3] = {frame.image_pos[g.idx[0]].cast<double>(), frame.image_pos[g.idx[1]].cast<double>(),
+                                      frame.image_pos[g.idx[2]].cast<double>()};
+              if (!g.own.owns(qv, q, bary)) return false;
+              owner = &g;
+              return true;
+            };
+            auto try_quad = [&](int qr, int qc, bool first_guess) {
+              if (qr < 0 || qc < 0) return false;
+              const Quad& qd = quad[std::size_t(qr) * QW + qc];
+              const int first = first_guess ? 0 : 1;
+              return try_triangle(qd.tri[first]) || try_triangle(qd.tri[1 - first]);
+            };
+            const Quad& here = quad[std::size_t(row) * QW + col];
+            const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
+            if (!try_quad(row, col, guess)) {
+              const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
+              if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
+                    (left && top && try_quad(row - 1, col - 1, true))))
+                continue;
+            }
+            if (level < owner->coarsest || level > owner->level) continue;
+            const double ramp = ramp_of[owner->level];
+            const Vector3d dir = (X - centre).normalized();
+            VoxelSample v;
+            if (!voxel_sample(frame, owner->idx, owner->normal, frame.position[owner->idx[0]].cast<double>(), bary, X, dir,
+                              ramp, options, &v))
+              continue;
+            std::int64_t idx[3];
+            idx[ax] = ia;
+            idx[bx] = ib;
+            idx[cx] = ic;
+            const VoxelKey key = VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
+            const VoxelKey origin =
+                VoxelKey::make(level, key.x() & block_mask, key.y() & block_mask, key.z() & block_mask);
+            accumulate(cache.voxel(key, origin), v.distance, v.weight, v.has_colour ? v.colour : nullptr);
+            ++local;
+          }
+        }
+    }
+    contributions.fetch_add(local, std::memory_order_relaxed);
+  });
+  stats.contributions = contributions;
+  *stats_out = stats;
+  return true;
+}
+
+}  // namespace sf
