@@ -92,6 +92,12 @@ class VoxelTable {
   // Erased voxels become absent; blocks without live voxels are dropped.
   void compact();
 
+  // Visits every block: f(VoxelKey origin, int log, const VoxelData* voxels), in storage order.
+  template <class F>
+  void for_each_block(F&& f) const {
+    for (const Block& b : blocks_) f(b.origin, b.log, static_cast<const VoxelData*>(b.voxels.get()));
+  }
+
   // Visits every live voxel: f(VoxelKey, VoxelData&), block by block.
   template <class F>
   void for_each(F&& f) {

@@ -1,0 +1,235 @@
+#include "storage/tile_file.h"
+
+#include <fcntl.h>
+#include <lz4.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "engine/error.h"
+
+namespace sf {
+namespace {
+
+constexpr char kMagic[8] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
+constexpr std::size_t kHeaderBytes = 64;  // 56 bytes of fields + their checksum
+static_assert(sizeof(VoxelData) == 24, "tile records are six float32");
+
+// Little-endian field packing (the format is little-endian whatever the host).
+void put32(unsigned char* p, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
+}
+void put64(unsigned char* p, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
+}
+std::uint32_t get32(const unsigned char* p) {
+  std::uint32_t v = 0;
+  for (int i = 0; i < 4; ++i) v |= std::uint32_t(p[i]) << (8 * i);
+  return v;
+}
+std::uint64_t get64(const unsigned char* p) {
+  std::uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v |= std::uint64_t(p[i]) << (8 * i);
+  return v;
+}
+void put_float(unsigned char* p, float f) {
+  std::uint32_t u;
+  std::memcpy(&u, &f, 4);
+  put32(p, u);
+}
+float get_float(const unsigned char* p) {
+  const std::uint32_t u = get32(p);
+  float f;
+  std::memcpy(&f, &u, 4);
+  return f;
+}
+
+std::string errno_text() { return std::strerror(errno); }
+
+void write_all(int fd, const unsigned char* data, std::size_t size, const std::filesystem::path& path) {
+  while (size > 0) {
+    const ssize_t n = ::write(fd, data, size);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw InputError(path.string() + ": cannot write tile: " + errno_text());
+    }
+    data += n;
+    size -= std::size_t(n);
+  }
+}
+
+}  // namespace
+
+std::uint64_t fnv1a64(const void* data, std::size_t size) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  std::uint64_t h = 0xcbf29ce484222325ull;
+  for (std::size_t i = 0; i < size; ++i) {
+    h ^= p[i];
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels) {
+  // Blocks in origin order, so the bytes do not depend on insertion order.
+  struct BlockView {
+    VoxelKey origin;
+    int log;
+    const VoxelData* data;
+  };
+  std::vector<BlockView> blocks;
+  voxels.for_each_block([&](VoxelKey o, int log, const VoxelData* d) { blocks.push_back({o, log, d}); });
+  std::sort(blocks.begin(), blocks.end(), [](const BlockView& a, const BlockView& b) { return a.origin < b.origin; });
+  std::size_t raw_size = 0;
+  for (const BlockView& b : blocks) raw_size += 8 + (std::size_t{1} << (3 * b.log)) * 24;
+  if (raw_size > std::size_t(LZ4_MAX_INPUT_SIZE))
+    throw std::length_error(path.string() + ": brick too large for one tile (" + std::to_string(raw_size) +
+                            " bytes); use a finer octree.brick_level");
+  std::vector<unsigned char> raw(raw_size);
+  unsigned char* p = raw.data();
+  for (const BlockView& b : blocks) {
+    put64(p, b.origin.bits);
+    p += 8;
+    const std::size_t n = std::size_t{1} << (3 * b.log);
+    for (std::size_t i = 0; i < n; ++i, p += 24) {
+      const VoxelData& v = b.data[i];
+      put_float(p, v.distance);
+      put_float(p + 4, v.weight);
+      for (int c = 0; c < 3; ++c) put_float(p + 8 + 4 * c, v.colour[c]);
+      put_float(p + 20, v.colour_weight);
+    }
+  }
+  std::vector<unsigned char> stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))));
+  const int packed = raw_size == 0 ? 0
+                                   : LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
+                                                          reinterpret_cast<char*>(stored.data() + kHeaderBytes),
+                                                          int(raw_size), int(stored.size() - kHeaderBytes));
+  if (raw_size > 0 && packed <= 0) throw std::runtime_error(path.string() + ": LZ4 compression failed");
+  unsigned char* h = stored.data();
+  std::memcpy(h, kMagic, 8);
+  put32(h + 8, kTileVersion);
+  put32(h + 12, std::uint32_t(voxels.brick_level()));
+  put32(h + 16, coord.x);
+  put32(h + 20, coord.y);
+  put32(h + 24, coord.z);
+  put32(h + 28, std::uint32_t(blocks.size()));
+  put64(h + 32, raw_size);
+  put64(h + 40, std::uint64_t(packed));
+  put64(h + 48, fnv1a64(h + kHeaderBytes, std::size_t(packed)));
+  put64(h + 56, fnv1a64(h, 56));
+  const std::size_t total = kHeaderBytes + std::size_t(packed);
+
+  // Temporary name in the same directory, fsync, rename, fsync the directory.
+  std::filesystem::path tmp = path;
+  tmp += ".tmp." + std::to_string(::getpid());
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw InputError(tmp.string() + ": cannot create tile: " + errno_text());
+  try {
+    write_all(fd, stored.data(), total, tmp);
+    if (::fsync(fd) != 0) throw InputError(tmp.string() + ": cannot sync tile: " + errno_text());
+  } catch (...) {
+    ::close(fd);
+    std::error_code ec;
+    std::filesystem::remove(tmp, ec);
+    throw;
+  }
+  if (::close(fd) != 0) {
+    std::error_code ec;
+    std::filesystem::remove(tmp, ec);
+    throw InputError(tmp.string() + ": cannot close tile: " + errno_text());
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw InputError(path.string() + ": cannot rename tile into place: " + ec.message());
+  }
+  const std::filesystem::path dir = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
+  return total;
+}
+
+BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out) {
+  const std::string name = path.string();
+  auto bad = [&](const std::string& what) { return input_error(name, "damaged tile: " + what); };
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw input_error(name, "cannot open tile");
+  in.seekg(0, std::ios::end);
+  const std::uint64_t file_size = std::uint64_t(in.tellg());
+  in.seekg(0);
+  if (file_size < kHeaderBytes) throw bad("shorter than its 64-byte header (" + std::to_string(file_size) + " bytes)");
+  unsigned char h[kHeaderBytes];
+  in.read(reinterpret_cast<char*>(h), kHeaderBytes);
+  if (!in) throw bad("cannot read the header");
+  if (std::memcmp(h, kMagic, 8) != 0) throw bad("wrong magic (not a scalefuse tile)");
+  if (get64(h + 56) != fnv1a64(h, 56)) throw bad("header checksum mismatch");
+  const std::uint32_t version = get32(h + 8);
+  if (version != kTileVersion)
+    throw bad("format version " + std::to_string(version) + ", this build reads " + std::to_string(kTileVersion));
+  const int brick_level = int(get32(h + 12));
+  if (brick_level != out.brick_level())
+    throw bad("brick level " + std::to_string(brick_level) + ", the job uses " + std::to_string(out.brick_level()));
+  const BrickCoord coord{get32(h + 16), get32(h + 20), get32(h + 24)};
+  const std::uint32_t block_count = get32(h + 28);
+  const std::uint64_t raw_size = get64(h + 32), stored_size = get64(h + 40);
+  if (stored_size != file_size - kHeaderBytes)
+    throw bad("payload of " + std::to_string(file_size - kHeaderBytes) + " bytes, header says " +
+              std::to_string(stored_size) + " (truncated?)");
+  // LZ4 expands at most 255:1; a larger raw size is a lie, not an allocation to make.
+  if (raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE) || raw_size > 255 * stored_size + 16)
+    throw bad("implausible raw size " + std::to_string(raw_size));
+  std::vector<unsigned char> stored(stored_size);
+  in.read(reinterpret_cast<char*>(stored.data()), std::streamsize(stored_size));
+  if (!in) throw bad("cannot read the payload");
+  if (get64(h + 48) != fnv1a64(stored.data(), stored.size())) throw bad("payload checksum mismatch");
+  std::vector<unsigned char> raw(raw_size);
+  if (raw_size > 0) {
+    const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(stored.data()), reinterpret_cast<char*>(raw.data()),
+                                      int(stored_size), int(raw_size));
+    if (n < 0 || std::uint64_t(n) != raw_size) throw bad("LZ4 payload does not decompress to its stated size");
+  }
+  if (out.block_count() != 0) throw std::logic_error(name + ": read_tile into a non-empty table");
+  const unsigned char* p = raw.data();
+  const unsigned char* end = raw.data() + raw.size();
+  std::uint64_t previous = 0;
+  for (std::uint32_t b = 0; b < block_count; ++b) {
+    if (end - p < 8) throw bad("block " + std::to_string(b) + " runs past the payload");
+    const VoxelKey origin{get64(p)};
+    p += 8;
+    const int level = origin.level();
+    if ((origin.bits >> 62) != 0 || level > kMaxLevel || !valid_voxel(level, origin.x(), origin.y(), origin.z()))
+      throw bad("block " + std::to_string(b) + " has an invalid key");
+    if (b > 0 && origin.bits <= previous) throw bad("blocks out of order or duplicated");
+    previous = origin.bits;
+    if (out.block_origin(origin) != origin) throw bad("block " + std::to_string(b) + " is not aligned");
+    const BrickCoord bc = brick_of(origin, brick_level);
+    if (bc.x != coord.x || bc.y != coord.y || bc.z != coord.z) throw bad("block " + std::to_string(b) + " lies outside the brick");
+    const std::size_t n = std::size_t{1} << (3 * block_log(level, brick_level));
+    if (std::size_t(end - p) < n * 24) throw bad("block " + std::to_string(b) + " runs past the payload");
+    BlockRef ref = out.block(origin, true);
+    for (std::size_t i = 0; i < n; ++i, p += 24) {
+      VoxelData& v = ref.data[i];
+      v.distance = get_float(p);
+      v.weight = get_float(p + 4);
+      for (int c = 0; c < 3; ++c) v.colour[c] = get_float(p + 8 + 4 * c);
+      v.colour_weight = get_float(p + 20);
+      if (!std::isfinite(v.distance) || !std::isfinite(v.weight) || !std::isfinite(v.colour_weight))
+        throw bad("block " + std::to_string(b) + " holds a non-finite value");
+    }
+  }
+  if (p != end) throw bad("trailing bytes after the last block");
+  return coord;
+}
+
+}  // namespace sf
