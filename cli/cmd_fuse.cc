@@ -2,7 +2,10 @@
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
+#include <unistd.h>
+
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -14,23 +17,18 @@
 #include "engine/fusion.h"
 #include "engine/meshio/ply_io.h"
 #include "engine/vdb_export.h"
+#include "scheduler/job.h"
 
 namespace sf::cli {
 
 namespace {
 
-struct FuseArgs {
-  std::string input, output, config, export_vdb, stats_json;
-  std::string format, colmap_maps, mve_depth, mve_image, mve_confidence, bbox;
-  std::vector<std::string> sets;
-  int threads = 0;
-  bool quiet = false, print_params = false;
-};
 
 nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
   nlohmann::json j;
   j["format"] = s.format;
   j["depth_maps"] = s.depth_maps;
+  j["resumed_at"] = s.resumed_at;
   j["samples"] = s.samples;
   j["triangles_in"] = s.triangles;
   j["contributions"] = s.contributions;
@@ -80,6 +78,36 @@ void print_summary(const FusionStats& s, const Mesh& mesh, const std::string& ou
   std::printf("mesh written to %s\n", std::filesystem::absolute(output).string().c_str());
 }
 
+// Parameters that shape the integrated field: a job refuses to resume when they change.
+// (Regularization and extraction may change: they rerun from the job's tiles.)
+const std::vector<std::string> kIntegrationParameters = {"input.", "triangulate.", "integrate.", "octree."};
+
+std::size_t default_memory_limit() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  if (pages <= 0 || page <= 0) return std::size_t{1} << 30;
+  return std::size_t(pages) * std::size_t(page) / 4;  // a quarter of RAM for resident bricks
+}
+
+void write_text_atomically(const std::filesystem::path& path, const std::string& text) {
+  const std::filesystem::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream out(tmp);
+    out << text;
+    if (!out) throw input_error(tmp.string(), "cannot write");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+// The job's copy of the mesh: a hard link to the output where the file system allows, else a copy.
+void link_into_job(const std::filesystem::path& output, const std::filesystem::path& job_mesh) {
+  std::error_code ec;
+  std::filesystem::remove(job_mesh, ec);
+  std::filesystem::create_hard_link(output, job_mesh, ec);
+  if (ec) std::filesystem::copy_file(output, job_mesh, std::filesystem::copy_options::overwrite_existing);
+}
+
+}  // namespace
+
 void run_fuse(const FuseArgs& a) {
   FusionOptions options;
   ParameterSet params;
@@ -105,6 +133,33 @@ void run_fuse(const FuseArgs& a) {
 
   const int threads = a.threads > 0 ? a.threads : tbb::info::default_concurrency();
   auto source = open_input(a.input, options.input);
+
+  // The job directory: given, or next to the output.
+  const bool implicit_job = a.job.empty();
+  JobOptions job_options;
+  job_options.dir = implicit_job ? std::filesystem::path(a.output + ".job") : std::filesystem::path(a.job);
+  job_options.memory_limit = a.memory_limit.empty() ? default_memory_limit() : parse_byte_size(a.memory_limit, "--memory-limit");
+  job_options.checkpoint_every = a.checkpoint_every;
+  job_options.checkpoint_seconds = a.checkpoint_seconds;
+  if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_AFTER")) job_options.kill_after = std::strtoull(k, nullptr, 10);
+  const std::string identity = params.assignments(kIntegrationParameters);
+  const std::string input_abs = std::filesystem::absolute(a.input).string();
+  const std::string output_abs = std::filesystem::absolute(a.output).string();
+  if (implicit_job && std::filesystem::exists(job_options.dir / "job.sqlite")) {
+    // An implicit job left by an earlier run with other settings is stale: start over.
+    std::string old_identity;
+    const JobStatus old = Job::recorded(job_options.dir, &old_identity);
+    if (old_identity != identity || old.input != input_abs) {
+      if (!a.quiet) std::fprintf(stderr, "starting over: %s was made with other inputs or parameters\n", job_options.dir.c_str());
+      std::filesystem::remove_all(job_options.dir);
+    }
+  }
+  Job job(job_options, identity, input_abs, output_abs);
+  write_text_atomically(job.dir() / "config.toml", "# effective configuration of this job (scalefuse resume reads it)\n" + params.assignments());
+  if (!a.quiet)
+    std::fprintf(stderr, "job: %s (bricks in memory up to %.2f GiB, checkpoint every %zu depth maps or %.0f s)\n",
+                 std::filesystem::absolute(job.dir()).c_str(), double(job_options.memory_limit) / double(1u << 30),
+                 job_options.checkpoint_every, job_options.checkpoint_seconds);
   if (!a.quiet)
     std::fprintf(stderr, "input: %s (%s, %zu depth maps), %d threads\n", a.input.c_str(), source->format().c_str(),
                  source->size(), threads);
@@ -116,10 +171,14 @@ void run_fuse(const FuseArgs& a) {
   FusionStats stats;
   Mesh mesh;
   tbb::task_arena arena(threads);
-  arena.execute([&] { mesh = fuse(*source, options, hooks, &stats); });
+  arena.execute([&] { mesh = fuse(*source, options, hooks, &stats, &job); });
   printer.finish();
   if (mesh.faces.empty()) throw InputError("the fused field has no surface (no zero crossing survived); nothing written");
   write_ply_mesh(a.output, mesh);
+  link_into_job(a.output, job.dir() / "mesh.ply");
+  job.finished(std::filesystem::absolute(a.output));
+  if (!a.quiet && stats.resumed_at > 0)
+    std::fprintf(stderr, "resumed: %zu of %zu depth maps were already integrated\n", stats.resumed_at, stats.depth_maps);
   if (!a.stats_json.empty()) {
     const std::string tmp = a.stats_json + ".tmp";
     std::ofstream(tmp) << stats_json(stats, mesh).dump(2) << "\n";
@@ -129,7 +188,17 @@ void run_fuse(const FuseArgs& a) {
   else std::printf("mesh written to %s\n", std::filesystem::absolute(a.output).string().c_str());
 }
 
-}  // namespace
+void add_job_options(CLI::App* cmd, FuseArgs& args) {
+  cmd->add_option("--threads", args.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--memory-limit", args.memory_limit, "memory for bricks, e.g. 1.5G (default: a quarter of RAM)");
+  cmd->add_option("--checkpoint-every", args.checkpoint_every, "checkpoint after this many depth maps (default 50)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--checkpoint-seconds", args.checkpoint_seconds, "checkpoint at least this often (default 300 s)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--export-vdb", args.export_vdb, "also write the regularized field as OpenVDB grids");
+  cmd->add_option("--stats", args.stats_json, "write the run's statistics as JSON");
+  cmd->add_flag("-q,--quiet", args.quiet, "no progress or summary");
+}
 
 void add_fuse_command(CLI::App& app) {
   auto args = std::make_shared<FuseArgs>();
@@ -144,11 +213,9 @@ void add_fuse_command(CLI::App& app) {
   cmd->add_option("--image", args->mve_image, "MVE colour embedding (e.g. undist-L2)");
   cmd->add_option("--confidence", args->mve_confidence, "MVE confidence embedding (e.g. conf-L2)");
   cmd->add_option("--bbox", args->bbox, "clip box xmin,ymin,zmin,xmax,ymax,zmax (metres)");
-  cmd->add_option("--threads", args->threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
-  cmd->add_option("--export-vdb", args->export_vdb, "also write the regularized field as OpenVDB grids");
-  cmd->add_option("--stats", args->stats_json, "write the run's statistics as JSON");
+  cmd->add_option("--job", args->job, "job directory (default: OUTPUT.job); an unfinished job there resumes");
+  add_job_options(cmd, *args);
   cmd->add_flag("--print-params", args->print_params, "print the effective parameters and exit");
-  cmd->add_flag("-q,--quiet", args->quiet, "no progress or summary");
   cmd->callback([args] { run_fuse(*args); });
 }
 

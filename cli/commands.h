@@ -4,10 +4,27 @@
 // InputError to exit code 2 and everything else to 1.
 #include <CLI/CLI.hpp>
 
+#include <string>
+#include <vector>
+
 namespace sf::cli {
+
+// The options of `fuse`, shared with `resume`.
+struct FuseArgs {
+  std::string input, output, config, export_vdb, stats_json, job, memory_limit;
+  std::string format, colmap_maps, mve_depth, mve_image, mve_confidence, bbox;
+  std::vector<std::string> sets;
+  int threads = 0;
+  std::size_t checkpoint_every = 50;
+  double checkpoint_seconds = 300;
+  bool quiet = false, print_params = false;
+};
+void run_fuse(const FuseArgs& args);
+void add_job_options(CLI::App* cmd, FuseArgs& args);  // threads, memory, checkpoints, outputs
 
 void add_fuse_command(CLI::App& app);
 void add_synth_command(CLI::App& app);
 void add_eval_command(CLI::App& app);
+void add_job_commands(CLI::App& app);  // resume, status
 
 }  // namespace sf::cli

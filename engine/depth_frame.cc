@@ -4,12 +4,34 @@
 #include <stdexcept>
 #include <string>
 
+#include "engine/hash.h"
+
 namespace sf {
 
 std::size_t DepthFrame::valid_count() const {
   std::size_t n = 0;
   for (auto v : valid) n += v ? 1 : 0;
   return n;
+}
+
+std::uint64_t DepthFrame::content_hash() const {
+  std::uint64_t h = fnv1a64(&width, sizeof width);
+  h = fnv1a64(&height, sizeof height, h);
+  const int kind = sensor.kind == Sensor::Kind::Perspective ? 0 : 1;
+  h = fnv1a64(&kind, sizeof kind, h);
+  h = fnv1a64(sensor.R.data(), 9 * sizeof(double), h);
+  h = fnv1a64(sensor.t.data(), 3 * sizeof(double), h);
+  const double k[4] = {sensor.fx, sensor.fy, sensor.cx, sensor.cy};
+  h = fnv1a64(k, sizeof k, h);
+  h = fnv1a64(valid.data(), valid.size(), h);
+  for (std::size_t i = 0; i < valid.size(); ++i) {
+    if (!valid[i]) continue;
+    h = fnv1a64(position[i].data(), 3 * sizeof(float), h);
+    h = fnv1a64(&footprint[i], sizeof(float), h);
+    if (!confidence.empty()) h = fnv1a64(&confidence[i], sizeof(float), h);
+    if (!colour.empty()) h = fnv1a64(colour[i].data(), 3, h);
+  }
+  return h;
 }
 
 void fill_perspective_samples(DepthFrame& frame, const std::vector<float>& depth, bool ray_distance) {

@@ -66,6 +66,9 @@ struct DepthFrame {
 
   std::size_t size() const { return std::size_t(width) * std::size_t(height); }
   std::size_t valid_count() const;
+  // A hash of everything the fusion reads: size, sensor, and every sample's validity, position,
+  // footprint, confidence and colour. A job compares it to notice changed inputs.
+  std::uint64_t content_hash() const;
 };
 
 // Fills valid/position/image_pos/footprint of a perspective frame from a depth image.

@@ -6,6 +6,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <chrono>
 #include <mutex>
 #include <sstream>
@@ -97,7 +98,8 @@ void clip_to_box(DepthFrame& f, const std::optional<Eigen::AlignedBox3d>& box) {
 
 }  // namespace
 
-Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats_out) {
+Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats_out,
+          FusionJournal* journal) {
   options.check();
   FusionStats stats;
   stats.format = source.format();
@@ -113,12 +115,22 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     stage_start = now;
   };
 
-  // Pass 1: bounds of the data, so the root cube is no larger than the data needs.
+  // Pass 1: bounds of the data, so the root cube is no larger than the data needs, and each depth
+  // map's identity for the job.
+  std::vector<FrameIdentity> identities(frames.size());
   Eigen::AlignedBox3d bounds;
   std::mutex bounds_mutex;
   std::size_t samples = 0, bounded = 0;
   tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t i) {
     DepthFrame f = source.load(frames[i]);
+    if (journal) {
+      FrameIdentity& id = identities[i];
+      id.name = source.frame_name(frames[i]);
+      std::error_code ec;
+      const auto size = std::filesystem::file_size(id.name, ec);
+      id.file_size = ec ? 0 : std::uint64_t(size);
+      id.hash = f.content_hash();
+    }
     clip_to_box(f, clip);
     Eigen::AlignedBox3d b;
     std::size_t n = 0;
@@ -140,12 +152,15 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
 
   // Pass 2: stream the depth maps through read -> triangulate (parallel) -> integrate (in order).
   BrickMap map(options.octree.brick_level);
+  const std::size_t first = journal ? journal->begin(identities, root, map) : 0;
+  if (first > frames.size()) throw std::logic_error("journal reports more depth maps than the input has");
+  stats.resumed_at = first;
   struct Item {
     std::size_t index = 0;
     DepthFrame frame;
     std::vector<FrameTriangle> triangles;
   };
-  std::size_t next = 0, done = 0;
+  std::size_t next = first, done = first;
   IntegrateStats integ;
   const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
   tbb::parallel_pipeline(
@@ -171,9 +186,14 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
           tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
             // Depth maps enter the field strictly in index order (equations 2-3 are order-sensitive
             // in floating point).
+            map.next_epoch();
             integ.add(integrate_frame(item->frame, item->triangles, root, options.integrate, map));
-            report(hooks.progress, "integrate", double(++done), double(frames.size()));
+            ++done;
+            if (journal) journal->frame_done(done, map);
+            report(hooks.progress, "integrate", double(done), double(frames.size()));
           }));
+  if (journal) journal->integrated(map);
+  map.load_all();
   stats.triangles = integ.triangles;
   stats.contributions = integ.contributions;
   for (int l = 0; l <= kMaxLevel; ++l) stats.triangles_per_level[l] = integ.triangles_per_level[l];

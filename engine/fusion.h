@@ -1,6 +1,7 @@
 #pragma once
 // The whole fusion, input -> triangles -> bricks -> hSDF -> regularized voxels -> tetrahedra -> mesh.
 #include <array>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -46,6 +47,7 @@ struct StageTime {
 struct FusionStats {
   std::string format;
   std::size_t depth_maps = 0, samples = 0, triangles = 0, contributions = 0;
+  std::size_t resumed_at = 0;  // depth maps already integrated by an earlier run of the job
   RootCube root;
   std::array<std::size_t, kMaxLevel + 1> voxels_fused{};        // after integration
   std::array<std::size_t, kMaxLevel + 1> voxels_regularized{};  // after section 6
@@ -62,8 +64,33 @@ struct FusionHooks {
   std::function<void(const BrickMap&, const RootCube&)> on_regularized;
 };
 
-// Runs the fusion in the calling TBB arena. Throws InputError on bad input.
-Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats);
+// What a job remembers of one depth map, to notice changed inputs on resume.
+struct FrameIdentity {
+  std::string name;            // the file it comes from
+  std::uint64_t file_size = 0;  // bytes (0 if the name is not a file)
+  std::uint64_t hash = 0;      // DepthFrame::content_hash()
+};
+
+// A journal of the integration that makes it resumable (implemented by scheduler/job: the job
+// directory). fuse() calls it in this order: begin, frame_done after each depth map (in input
+// order, between depth maps: no other access to the map runs), integrated.
+class FusionJournal {
+ public:
+  virtual ~FusionJournal() = default;
+  // Returns how many depth maps (a prefix, in input order) the map already holds after restoring
+  // it from the last checkpoint; 0 for a new job. Throws InputError if the job was started on
+  // other inputs or another configuration.
+  virtual std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) = 0;
+  // `done` depth maps are integrated; may spill bricks and commit a checkpoint.
+  virtual void frame_done(std::size_t done, BrickMap& map) = 0;
+  // Integration is complete: the final checkpoint.
+  virtual void integrated(BrickMap& map) = 0;
+};
+
+// Runs the fusion in the calling TBB arena. Throws InputError on bad input. With a journal the
+// integration resumes from, and checkpoints into, the journal's job.
+Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats,
+          FusionJournal* journal = nullptr);
 
 // The root cube for a set of sample bounds (see OctreeOptions).
 RootCube root_cube_for(const Eigen::AlignedBox3d& data_bounds, double padding);

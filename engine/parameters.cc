@@ -121,12 +121,25 @@ std::string ParameterSet::value_text(const Parameter& p) const {
         if constexpr (std::is_same_v<T, std::string>) return "\"" + *target + "\"";
         else if constexpr (std::is_same_v<T, bool>) return *target ? "true" : "false";
         else if constexpr (std::is_same_v<T, double>) {
-          std::ostringstream o;
-          o << *target;
-          return o.str();
+          // Shortest text that reads back to the same double (the job journal compares it).
+          char buf[64];
+          const auto r = std::to_chars(buf, buf + sizeof buf, *target);
+          std::string t(buf, r.ptr);
+          if (t.find_first_of(".eEn") == std::string::npos) t += ".0";  // TOML: a float, not an integer
+          return t;
         } else return std::to_string(*target);
       },
       p.target);
+}
+
+std::string ParameterSet::assignments(const std::vector<std::string>& prefixes) const {
+  std::ostringstream o;
+  for (const auto& p : params_) {
+    bool wanted = prefixes.empty();
+    for (const auto& prefix : prefixes) wanted = wanted || p.name.rfind(prefix, 0) == 0;
+    if (wanted) o << p.name << " = " << value_text(p) << "\n";
+  }
+  return o.str();
 }
 
 std::string ParameterSet::describe() const {

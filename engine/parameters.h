@@ -35,6 +35,9 @@ class ParameterSet {
   const std::vector<Parameter>& parameters() const { return params_; }
   // "name = value  # unit: help" lines, in registration order.
   std::string describe() const;
+  // "name = value" lines (valid TOML with dotted keys) of the parameters whose names start with
+  // one of `prefixes` (all if empty), in registration order.
+  std::string assignments(const std::vector<std::string>& prefixes = {}) const;
 
  private:
   Parameter* find(const std::string& name);

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <mutex>
+#include <stdexcept>
+
+#include "storage/tile_store.h"
 
 namespace sf {
 
@@ -60,6 +63,9 @@ void BrickMap::apply(std::vector<Contribution>& batch) {
       current = &brick(bc);
       current_id = bc.packed();
       lock = std::unique_lock<std::mutex>(current->mutex);
+      make_resident(*current);
+      current->dirty = true;
+      current->last_use = epoch_;
     }
     accumulate(current->voxels.find_or_insert(c.key), c.distance, c.weight, c.has_colour ? c.colour : nullptr);
   }
@@ -68,12 +74,106 @@ void BrickMap::apply(std::vector<Contribution>& batch) {
 BlockRef BrickMap::block(VoxelKey key) {
   Brick& b = brick(brick_of(key, brick_level_));
   std::lock_guard lock(b.mutex);
+  make_resident(b);
+  b.dirty = true;
+  b.last_use = epoch_;
   return b.voxels.block(key, true);
+}
+
+void BrickMap::make_resident(Brick& b) {
+  if (b.resident) return;
+  store_->read(b.coord, b.generation, b.voxels);
+  b.resident = true;
+  b.dirty = false;
+  ++spill_.reloaded;
+  spill_.bytes_read += b.tile_bytes;
+}
+
+void BrickMap::write_tile_of(Brick& b) {
+  const std::uint64_t g = next_generation_++;
+  b.tile_bytes = store_->write(b.coord, g, b.voxels);
+  spill_.bytes_written += b.tile_bytes;
+  // The previous tile goes unless the committed checkpoint still needs it.
+  if (b.generation != 0 && b.generation != b.checkpoint_generation) store_->remove(b.coord, b.generation);
+  b.generation = g;
+  b.dirty = false;
+}
+
+void BrickMap::attach_store(const TileStore* store, std::size_t memory_limit) {
+  store_ = store;
+  memory_limit_ = memory_limit;
+}
+
+std::size_t BrickMap::resident_bytes() const {
+  std::size_t n = 0;
+  for (Brick* b : bricks())
+    if (b->resident) n += b->voxels.memory_bytes() + sizeof(Brick);
+  return n;
+}
+
+void BrickMap::enforce_limit() {
+  if (!store_) return;
+  std::vector<Brick*> resident;
+  std::size_t bytes = 0;
+  for (Brick* b : bricks())
+    if (b->resident) {
+      resident.push_back(b);
+      bytes += b->voxels.memory_bytes() + sizeof(Brick);
+    }
+  if (bytes <= memory_limit_) return;
+  std::stable_sort(resident.begin(), resident.end(), [](Brick* a, Brick* b) { return a->last_use < b->last_use; });
+  for (Brick* b : resident) {
+    if (bytes <= memory_limit_) break;
+    bytes -= b->voxels.memory_bytes() + sizeof(Brick);
+    if (b->dirty || b->generation == 0) write_tile_of(*b);
+    b->voxels.clear();
+    b->resident = false;
+    ++spill_.spilled;
+  }
+}
+
+std::vector<ManifestEntry> BrickMap::write_checkpoint() {
+  if (!store_) throw std::logic_error("BrickMap::write_checkpoint without a tile store");
+  std::vector<ManifestEntry> manifest;
+  for (Brick* b : bricks()) {
+    if (b->resident && (b->dirty || b->generation == 0)) write_tile_of(*b);
+    manifest.push_back({b->coord, b->generation, b->tile_bytes});
+  }
+  store_->sync();
+  return manifest;
+}
+
+void BrickMap::checkpoint_committed() {
+  for (Brick* b : bricks()) {
+    if (b->checkpoint_generation != 0 && b->checkpoint_generation != b->generation)
+      store_->remove(b->coord, b->checkpoint_generation);
+    b->checkpoint_generation = b->generation;
+  }
+}
+
+void BrickMap::restore(const std::vector<ManifestEntry>& manifest, std::uint64_t max_generation) {
+  clear();
+  for (const ManifestEntry& e : manifest) {
+    Brick& b = brick(e.coord);
+    b.resident = false;
+    b.dirty = false;
+    b.generation = b.checkpoint_generation = e.generation;
+    b.tile_bytes = e.bytes;
+  }
+  next_generation_ = max_generation + 1;
+}
+
+void BrickMap::load_all() {
+  for (Brick* b : bricks()) {
+    std::lock_guard lock(b->mutex);
+    make_resident(*b);
+  }
 }
 
 const VoxelData* BrickMap::find(VoxelKey key) const {
   const Brick* b = find_brick(brick_of(key, brick_level_));
   if (!b) return nullptr;
+  if (!b->resident) throw std::logic_error("BrickMap::find on a spilled brick (call load_all first)");
   const VoxelData* v = b->voxels.find(key);
   return (v && v->live()) ? v : nullptr;
 }

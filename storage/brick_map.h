@@ -6,6 +6,7 @@
 // next brick, except at the root's upper faces. Bricks are the unit that later stages page to
 // disk and process independently, so all access goes through a brick.
 #include <cstdint>
+#include <atomic>
 #include <memory>
 #include <mutex>
 #include <shared_mutex>
@@ -28,8 +29,29 @@ BrickCoord brick_of(VoxelKey key, int brick_level);
 struct Brick {
   explicit Brick(BrickCoord c, int brick_level) : coord(c), voxels(brick_level) {}
   BrickCoord coord;
-  std::mutex mutex;  // held while creating blocks or applying contributions
+  std::mutex mutex;  // held while loading, creating blocks or applying contributions
   VoxelTable voxels;
+  // Out-of-core state (see BrickMap::attach_store). A brick not resident has its voxels only in
+  // tile `generation`.
+  bool resident = true;
+  bool dirty = false;                    // changed since tile `generation` was written
+  std::uint64_t generation = 0;          // newest tile, 0 = none
+  std::uint64_t checkpoint_generation = 0;  // the tile the last committed checkpoint refers to
+  std::uint64_t tile_bytes = 0;          // size of tile `generation`
+  std::uint64_t last_use = 0;            // epoch of the last access (least recently used spills first)
+};
+
+class TileStore;
+
+// One brick of a checkpoint: which tile holds it.
+struct ManifestEntry {
+  BrickCoord coord;
+  std::uint64_t generation = 0, bytes = 0;
+};
+
+struct SpillStats {
+  std::size_t spilled = 0, reloaded = 0;  // cumulative brick counts
+  std::uint64_t bytes_written = 0, bytes_read = 0;
 };
 
 // One contribution of one depth map to one voxel (d_i, w_i of equations 2-3, plus colour).
@@ -62,18 +84,49 @@ class BrickMap {
   const VoxelData* find(VoxelKey key) const;  // not safe concurrently with apply()
   VoxelData* find(VoxelKey key);
 
-  // All bricks, in ascending packed-coordinate order (deterministic).
+  // All bricks, in ascending packed-coordinate order (deterministic). Their voxels are only in
+  // memory if resident (after load_all(), all are).
   std::vector<Brick*> bricks() const;
-  // Drops erased voxels and empty bricks.
+  // Drops erased voxels and empty bricks (all bricks must be resident).
   void compact();
   // Drops everything.
   void clear();
 
+  // --- Out of core ---------------------------------------------------------------------------
+  // Lets bricks spill to `store` when their memory passes `memory_limit` bytes. Spilling happens
+  // only in enforce_limit(), which callers run at safe points (between depth maps), so block
+  // pointers handed out during a depth map stay valid: a depth map's bricks are pinned for its
+  // duration. A brick touched again is reloaded from its tile under its own lock.
+  void attach_store(const TileStore* store, std::size_t memory_limit);
+  // Starts a new access epoch (one per depth map).
+  void next_epoch() { ++epoch_; }
+  // Spills least recently used bricks (ties by coordinate) until resident memory fits the limit.
+  // Not safe concurrently with any other access.
+  void enforce_limit();
+  // Writes every changed resident brick to a new tile and returns the manifest of all bricks.
+  std::vector<ManifestEntry> write_checkpoint();
+  // After the manifest is committed: tiles the previous checkpoint referred to are deleted.
+  void checkpoint_committed();
+  // Recreates the bricks of a committed checkpoint, none resident; generations continue after
+  // `max_generation`. Deletes tiles written after that checkpoint.
+  void restore(const std::vector<ManifestEntry>& manifest, std::uint64_t max_generation);
+  // Makes every brick resident (for stages that do not page yet: regularization, extraction).
+  void load_all();
+  std::size_t resident_bytes() const;
+  std::uint64_t max_generation() const { return next_generation_ - 1; }
+  const SpillStats& spill_stats() const { return spill_; }
+
  private:
   Brick& brick(BrickCoord c);
   const Brick* find_brick(BrickCoord c) const;
+  void make_resident(Brick& b);   // caller holds b.mutex
+  void write_tile_of(Brick& b);   // caller holds b.mutex (or has exclusive access)
 
   int brick_level_;
+  const TileStore* store_ = nullptr;
+  std::size_t memory_limit_ = 0;
+  std::uint64_t epoch_ = 1, next_generation_ = 1;
+  SpillStats spill_;
   mutable std::shared_mutex bricks_mutex_;
   std::unordered_map<std::uint64_t, std::unique_ptr<Brick>> bricks_;
 };

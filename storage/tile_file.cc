@@ -67,17 +67,7 @@ void write_all(int fd, const unsigned char* data, std::size_t size, const std::f
 
 }  // namespace
 
-std::uint64_t fnv1a64(const void* data, std::size_t size) {
-  const auto* p = static_cast<const unsigned char*>(data);
-  std::uint64_t h = 0xcbf29ce484222325ull;
-  for (std::size_t i = 0; i < size; ++i) {
-    h ^= p[i];
-    h *= 0x100000001b3ull;
-  }
-  return h;
-}
-
-std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels) {
+std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels, bool durable) {
   // Blocks in origin order, so the bytes do not depend on insertion order.
   struct BlockView {
     VoxelKey origin;
@@ -133,7 +123,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   if (fd < 0) throw InputError(tmp.string() + ": cannot create tile: " + errno_text());
   try {
     write_all(fd, stored.data(), total, tmp);
-    if (::fsync(fd) != 0) throw InputError(tmp.string() + ": cannot sync tile: " + errno_text());
+    if (durable && ::fsync(fd) != 0) throw InputError(tmp.string() + ": cannot sync tile: " + errno_text());
   } catch (...) {
     ::close(fd);
     std::error_code ec;
@@ -152,7 +142,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
     throw InputError(path.string() + ": cannot rename tile into place: " + ec.message());
   }
   const std::filesystem::path dir = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  const int dfd = durable ? ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC) : -1;
   if (dfd >= 0) {
     ::fsync(dfd);
     ::close(dfd);

@@ -11,12 +11,14 @@
 // sorted, so a brick's tile is byte-identical however its voxels were inserted.
 //
 // Writes go to a temporary name in the same directory, are fsynced and renamed over the target
-// (and the directory is fsynced), so a tile is either the old one or the new one after a crash.
+// (and the directory is fsynced), so a tile is either the old one or the new one after a crash;
+// a job's store skips the per-file syncs and syncs once per checkpoint instead.
 // Reads check everything a damaged or foreign file could get wrong and throw InputError naming
 // the tile; they never allocate more than the header's sizes allow for a file of that length.
 #include <cstdint>
 #include <filesystem>
 
+#include "engine/hash.h"
 #include "storage/brick_map.h"
 
 namespace sf {
@@ -24,14 +26,14 @@ namespace sf {
 inline constexpr std::uint32_t kTileVersion = 1;
 
 // Writes `voxels` (the voxels of brick `coord` at brick level `voxels.brick_level()`) to `path`.
-// Returns the file's size in bytes.
-std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels);
+// Returns the file's size in bytes. With durable = false the file and directory are not fsynced
+// (the caller syncs many tiles at once, see TileStore::sync); the rename is still atomic.
+std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels,
+                         bool durable = true);
 
 // Reads a tile into `out` (which must be empty and have the tile's brick level); returns the
 // brick's coordinates. Throws InputError "path: problem" on any damage.
 BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out);
 
-// FNV-1a, 64 bit: the tile checksums (exposed for tests).
-std::uint64_t fnv1a64(const void* data, std::size_t size);
 
 }  // namespace sf

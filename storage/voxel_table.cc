@@ -11,10 +11,9 @@ std::size_t VoxelTable::live_count() const {
   return n;
 }
 
-std::size_t VoxelTable::memory_bytes() const {
-  std::size_t n = blocks_.capacity() * sizeof(Block) + index_keys_.capacity() * 12;
-  for (const Block& b : blocks_) n += (std::size_t{1} << (3 * b.log)) * sizeof(VoxelData);
-  return n;
+void VoxelTable::recount() {
+  bytes_ = blocks_.capacity() * sizeof(Block) + index_keys_.capacity() * 12;
+  for (const Block& b : blocks_) bytes_ += (std::size_t{1} << (3 * b.log)) * sizeof(VoxelData);
 }
 
 std::int64_t VoxelTable::find_slot(std::uint64_t origin) const {
@@ -48,10 +47,14 @@ BlockRef VoxelTable::block(VoxelKey key, bool create) {
   b.origin = origin;
   b.log = log;
   b.voxels = std::make_unique<VoxelData[]>(std::size_t{1} << (3 * log));
+  const std::size_t old_capacity = blocks_.capacity();
   blocks_.push_back(std::move(b));
-  if ((blocks_.size() + 1) * 10 > index_keys_.size() * 7)
+  bytes_ += (std::size_t{1} << (3 * log)) * sizeof(VoxelData) + (blocks_.capacity() - old_capacity) * sizeof(Block);
+  if ((blocks_.size() + 1) * 10 > index_keys_.size() * 7) {
+    bytes_ -= index_keys_.capacity() * 12;
     reindex(index_keys_.empty() ? 16 : index_keys_.size() * 2);
-  else {
+    bytes_ += index_keys_.capacity() * 12;
+  } else {
     const std::size_t mask = index_keys_.size() - 1;
     std::size_t i = std::hash<VoxelKey>{}(origin) & mask;
     while (index_keys_[i] != kEmpty) i = (i + 1) & mask;
@@ -90,6 +93,14 @@ void VoxelTable::compact() {
   std::size_t cap = 16;
   while ((blocks_.size() + 1) * 10 > cap * 7) cap *= 2;
   reindex(cap);
+  recount();
+}
+
+void VoxelTable::clear() {
+  std::vector<Block>().swap(blocks_);
+  std::vector<std::uint64_t>().swap(index_keys_);
+  std::vector<std::uint32_t>().swap(index_pos_);
+  bytes_ = 0;
 }
 
 }  // namespace sf

@@ -72,7 +72,7 @@ class VoxelTable {
   int brick_level() const { return brick_level_; }
   std::size_t block_count() const { return blocks_.size(); }
   std::size_t live_count() const;        // live voxels (a scan)
-  std::size_t memory_bytes() const;      // blocks and index
+  std::size_t memory_bytes() const { return bytes_; }  // blocks and index, kept up to date
 
   // The origin of the block holding `key`.
   VoxelKey block_origin(VoxelKey key) const {
@@ -91,6 +91,8 @@ class VoxelTable {
   VoxelData& find_or_insert(VoxelKey key);
   // Erased voxels become absent; blocks without live voxels are dropped.
   void compact();
+  // Drops every block and frees the memory.
+  void clear();
 
   // Visits every block: f(VoxelKey origin, int log, const VoxelData* voxels), in storage order.
   template <class F>
@@ -133,6 +135,8 @@ class VoxelTable {
   std::vector<Block> blocks_;
   std::vector<std::uint64_t> index_keys_;  // open addressing: origin key -> position in blocks_
   std::vector<std::uint32_t> index_pos_;
+  std::size_t bytes_ = 0;
+  void recount();
 };
 
 }  // namespace sf

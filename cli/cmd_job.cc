@@ -1,0 +1,66 @@
+// scalefuse resume DIR and scalefuse status DIR: a job directory's life after `fuse` started it.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "cli/commands.h"
+#include "engine/error.h"
+#include "scheduler/job.h"
+
+namespace sf::cli {
+
+namespace {
+
+void run_resume(const std::string& dir, FuseArgs args) {
+  const JobStatus st = Job::recorded(dir, nullptr);
+  if (st.input.empty() || st.output.empty())
+    throw InputError(dir + ": the job never got past its start; run fuse again");
+  args.input = st.input;
+  args.output = st.output;
+  args.job = dir;
+  args.config = (std::filesystem::path(dir) / "config.toml").string();
+  run_fuse(args);
+}
+
+void run_status(const std::string& dir, bool json) {
+  const JobStatus st = Job::status(dir);
+  if (json) {
+    nlohmann::json j = {{"stage", st.stage},           {"input", st.input},
+                        {"output", st.output},         {"depth_maps", st.depth_maps},
+                        {"integrated", st.integrated}, {"bricks", st.bricks},
+                        {"tile_bytes", st.tile_bytes}, {"journal_bytes", st.journal_bytes},
+                        {"last_checkpoint", st.last_checkpoint}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return;
+  }
+  std::printf("job          %s\n", std::filesystem::absolute(dir).c_str());
+  std::printf("stage        %s\n", st.stage.c_str());
+  std::printf("input        %s\n", st.input.c_str());
+  std::printf("output       %s\n", st.output.c_str());
+  std::printf("depth maps   %zu of %zu integrated (at the last checkpoint%s%s)\n", st.integrated, st.depth_maps,
+              st.last_checkpoint.empty() ? "" : ", ", st.last_checkpoint.c_str());
+  std::printf("bricks       %zu\n", st.bricks);
+  std::printf("on disk      %.1f MiB of tiles, %.1f MiB of journal\n", double(st.tile_bytes) / (1 << 20),
+              double(st.journal_bytes) / (1 << 20));
+}
+
+}  // namespace
+
+void add_job_commands(CLI::App& app) {
+  auto resume_dir = std::make_shared<std::string>();
+  auto args = std::make_shared<FuseArgs>();
+  CLI::App* resume = app.add_subcommand("resume", "continue a job from its last checkpoint (same inputs and parameters)");
+  resume->add_option("dir", *resume_dir, "job directory")->required();
+  add_job_options(resume, *args);
+  resume->callback([resume_dir, args] { run_resume(*resume_dir, *args); });
+
+  auto status_dir = std::make_shared<std::string>();
+  auto json = std::make_shared<bool>(false);
+  CLI::App* status = app.add_subcommand("status", "print a job's progress");
+  status->add_option("dir", *status_dir, "job directory")->required();
+  status->add_flag("--json", *json, "as JSON");
+  status->callback([status_dir, json] { run_status(*status_dir, *json); });
+}
+
+}  // namespace sf::cli

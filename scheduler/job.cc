@@ -1,0 +1,343 @@
+#include "scheduler/job.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/file.h>
+#include <sqlite3.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <ctime>
+#include <set>
+#include <sstream>
+
+#include "engine/error.h"
+
+namespace sf {
+namespace {
+
+constexpr int kJobVersion = 1;
+
+// Thin RAII over the SQLite C API: every failure becomes an exception naming the journal.
+class Statement {
+ public:
+  Statement(sqlite3* db, const std::string& sql, const std::string& where) : db_(db), where_(where) {
+    if (sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt_, nullptr) != SQLITE_OK) fail();
+  }
+  ~Statement() { sqlite3_finalize(stmt_); }
+  Statement& bind(int i, std::int64_t v) {
+    if (sqlite3_bind_int64(stmt_, i, v) != SQLITE_OK) fail();
+    return *this;
+  }
+  Statement& bind(int i, const std::string& v) {
+    if (sqlite3_bind_text(stmt_, i, v.c_str(), int(v.size()), SQLITE_TRANSIENT) != SQLITE_OK) fail();
+    return *this;
+  }
+  bool step() {  // true while a row is available
+    const int rc = sqlite3_step(stmt_);
+    if (rc == SQLITE_ROW) return true;
+    if (rc == SQLITE_DONE) return false;
+    fail();
+    return false;
+  }
+  void run() {
+    while (step()) {
+    }
+    sqlite3_reset(stmt_);
+  }
+  std::int64_t integer(int col) const { return sqlite3_column_int64(stmt_, col); }
+  std::string text(int col) const {
+    const unsigned char* t = sqlite3_column_text(stmt_, col);
+    return t ? std::string(reinterpret_cast<const char*>(t)) : std::string();
+  }
+
+ private:
+  [[noreturn]] void fail() const { throw InputError(where_ + ": job journal error: " + sqlite3_errmsg(db_)); }
+  sqlite3* db_;
+  sqlite3_stmt* stmt_ = nullptr;
+  std::string where_;
+};
+
+void exec(sqlite3* db, const std::string& sql, const std::string& where) {
+  char* err = nullptr;
+  if (sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &err) != SQLITE_OK) {
+    const std::string msg = err ? err : "unknown";
+    sqlite3_free(err);
+    throw InputError(where + ": job journal error: " + msg);
+  }
+}
+
+sqlite3* open_db(const std::filesystem::path& file, bool create) {
+  sqlite3* db = nullptr;
+  const int flags = SQLITE_OPEN_READWRITE | (create ? SQLITE_OPEN_CREATE : 0) | SQLITE_OPEN_FULLMUTEX;
+  if (sqlite3_open_v2(file.c_str(), &db, flags, nullptr) != SQLITE_OK) {
+    const std::string msg = db ? sqlite3_errmsg(db) : "out of memory";
+    sqlite3_close(db);
+    throw InputError(file.string() + ": cannot open the job journal: " + msg);
+  }
+  sqlite3_busy_timeout(db, 5000);
+  return db;
+}
+
+std::string meta(sqlite3* db, const std::string& key, const std::string& where) {
+  Statement s(db, "SELECT value FROM meta WHERE key = ?1", where);
+  s.bind(1, key);
+  return s.step() ? s.text(0) : std::string();
+}
+
+void set_meta(sqlite3* db, const std::string& key, const std::string& value, const std::string& where) {
+  Statement(db, "INSERT OR REPLACE INTO meta(key, value) VALUES(?1, ?2)", where).bind(1, key).bind(2, value).run();
+}
+
+std::string utc_now() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+std::string root_text(const RootCube& r) {
+  std::ostringstream o;
+  o.precision(17);
+  o << r.min.x() << "," << r.min.y() << "," << r.min.z() << "," << r.size;
+  return o.str();
+}
+
+// The first line where two texts differ, for a refusal message.
+std::string first_difference(const std::string& a, const std::string& b) {
+  std::istringstream ia(a), ib(b);
+  std::string la, lb;
+  while (true) {
+    const bool ga = bool(std::getline(ia, la)), gb = bool(std::getline(ib, lb));
+    if (!ga && !gb) return "";
+    if (!ga) la = "(nothing)";
+    if (!gb) lb = "(nothing)";
+    if (la != lb) return "job has '" + la + "', this run '" + lb + "'";
+  }
+}
+
+}  // namespace
+
+std::size_t parse_byte_size(const std::string& text, const std::string& what) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  std::string unit(end ? end : "");
+  double scale = 1;
+  if (unit == "K" || unit == "k" || unit == "KiB") scale = 1024.0;
+  else if (unit == "M" || unit == "MiB") scale = 1024.0 * 1024;
+  else if (unit == "G" || unit == "GiB") scale = 1024.0 * 1024 * 1024;
+  else if (unit == "T" || unit == "TiB") scale = 1024.0 * 1024 * 1024 * 1024;
+  else if (!unit.empty()) throw InputError(what + ": unknown size unit in '" + text + "' (use K, M, G or T)");
+  if (text.empty() || end == text.c_str() || !(v > 0) || !std::isfinite(v))
+    throw InputError(what + ": expected a positive size like 1.5G, got '" + text + "'");
+  return std::size_t(v * scale);
+}
+
+Job::Job(JobOptions options, std::string config, std::string input, std::string output)
+    : options_(std::move(options)), config_(std::move(config)), input_(std::move(input)), output_(std::move(output)) {
+  std::error_code ec;
+  std::filesystem::create_directories(options_.dir, ec);
+  if (ec) throw InputError(options_.dir.string() + ": cannot create the job directory: " + ec.message());
+  // One writer per job: a second process on the same directory is refused, not interleaved. The
+  // lock goes with the process, however it ends.
+  lock_fd_ = ::open((options_.dir / "job.lock").c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (lock_fd_ < 0 || ::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
+    if (lock_fd_ >= 0) ::close(lock_fd_);
+    throw InputError(options_.dir.string() + ": another scalefuse process is using this job");
+  }
+  const std::string where = (options_.dir / "job.sqlite").string();
+  try {
+    db_ = open_db(options_.dir / "job.sqlite", true);
+  } catch (...) {
+    ::close(lock_fd_);
+    throw;
+  }
+  try {
+  exec(db_,
+       "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL;"
+       "CREATE TABLE IF NOT EXISTS meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);"
+       "CREATE TABLE IF NOT EXISTS inputs(idx INTEGER PRIMARY KEY, name TEXT NOT NULL, size INTEGER NOT NULL,"
+       "  hash TEXT NOT NULL);"
+       "CREATE TABLE IF NOT EXISTS manifest(bx INTEGER, by INTEGER, bz INTEGER, generation INTEGER NOT NULL,"
+       "  bytes INTEGER NOT NULL, PRIMARY KEY(bx, by, bz));",
+       where);
+  store_ = std::make_unique<TileStore>(options_.dir / "tiles");
+  } catch (...) {
+    sqlite3_close(db_);
+    ::close(lock_fd_);
+    throw;
+  }
+  last_checkpoint_ = std::chrono::steady_clock::now();
+}
+
+Job::~Job() {
+  sqlite3_close(db_);
+  if (lock_fd_ >= 0) ::close(lock_fd_);
+}
+
+std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) {
+  const std::string where = options_.dir.string();
+  map.attach_store(store_.get(), options_.memory_limit);
+  const std::string version = meta(db_, "version", where);
+  if (version.empty()) {  // a new job
+    exec(db_, "BEGIN IMMEDIATE", where);
+    set_meta(db_, "version", std::to_string(kJobVersion), where);
+    set_meta(db_, "config", config_, where);
+    set_meta(db_, "input", input_, where);
+    set_meta(db_, "output", output_, where);
+    set_meta(db_, "root", root_text(root), where);
+    set_meta(db_, "brick_level", std::to_string(map.brick_level()), where);
+    set_meta(db_, "stage", "integrating", where);
+    set_meta(db_, "integrated", "0", where);
+    set_meta(db_, "max_generation", "0", where);
+    Statement ins(db_, "INSERT INTO inputs(idx, name, size, hash) VALUES(?1, ?2, ?3, ?4)", where);
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      char hash[17];
+      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(frames[i].hash));
+      ins.bind(1, std::int64_t(i)).bind(2, frames[i].name).bind(3, std::int64_t(frames[i].file_size)).bind(4, hash);
+      ins.run();
+    }
+    exec(db_, "COMMIT", where);
+    store_->remove_all_except({});
+    return 0;
+  }
+  if (std::stoi(version) != kJobVersion)
+    throw InputError(where + ": job format version " + version + ", this build handles " + std::to_string(kJobVersion));
+  // Same configuration and inputs, or refuse.
+  const std::string old_config = meta(db_, "config", where);
+  if (old_config != config_)
+    throw InputError(where + ": the configuration differs from the job's (" + first_difference(old_config, config_) +
+                     "); use a new --job directory");
+  std::size_t count = 0;
+  {
+    Statement s(db_, "SELECT idx, name, size, hash FROM inputs ORDER BY idx", where);
+    while (s.step()) {
+      const std::size_t i = std::size_t(s.integer(0));
+      if (i >= frames.size())
+        throw InputError(where + ": the inputs changed: the job has more depth maps (" + s.text(1) +
+                         " is gone); use a new --job directory");
+      char hash[17];
+      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(frames[i].hash));
+      if (s.text(1) != frames[i].name || std::uint64_t(s.integer(2)) != frames[i].file_size || s.text(3) != hash)
+        throw InputError(where + ": the inputs changed: depth map " + std::to_string(i) + " (" + frames[i].name +
+                         ") differs from the one the job integrated; use a new --job directory");
+      ++count;
+    }
+  }
+  if (count != frames.size())
+    throw InputError(where + ": the inputs changed: the job has " + std::to_string(count) + " depth maps, the input " +
+                     std::to_string(frames.size()) + "; use a new --job directory");
+  if (meta(db_, "root", where) != root_text(root) || meta(db_, "brick_level", where) != std::to_string(map.brick_level()))
+    throw InputError(where + ": the root cube or brick level differs from the job's");
+  // Restore the last checkpoint.
+  std::vector<ManifestEntry> manifest;
+  std::set<std::pair<std::uint64_t, std::uint64_t>> keep;
+  {
+    Statement s(db_, "SELECT bx, by, bz, generation, bytes FROM manifest ORDER BY bz, by, bx", where);
+    while (s.step()) {
+      ManifestEntry e;
+      e.coord = {std::uint32_t(s.integer(0)), std::uint32_t(s.integer(1)), std::uint32_t(s.integer(2))};
+      e.generation = std::uint64_t(s.integer(3));
+      e.bytes = std::uint64_t(s.integer(4));
+      manifest.push_back(e);
+      keep.insert({e.coord.packed(), e.generation});
+    }
+  }
+  for (const ManifestEntry& e : manifest)
+    if (!std::filesystem::exists(store_->path(e.coord, e.generation)))
+      throw InputError(store_->path(e.coord, e.generation).string() + ": tile of the last checkpoint is missing");
+  store_->remove_all_except(keep);
+  map.restore(manifest, std::stoull(meta(db_, "max_generation", where)));
+  done_ = std::stoull(meta(db_, "integrated", where));
+  return done_;
+}
+
+void Job::checkpoint(BrickMap& map, const char* stage) {
+  const std::string where = options_.dir.string();
+  const std::vector<ManifestEntry> manifest = map.write_checkpoint();  // tiles are fsynced
+  exec(db_, "BEGIN IMMEDIATE", where);
+  try {
+    exec(db_, "DELETE FROM manifest", where);
+    Statement ins(db_, "INSERT INTO manifest(bx, by, bz, generation, bytes) VALUES(?1, ?2, ?3, ?4, ?5)", where);
+    for (const ManifestEntry& e : manifest) {
+      ins.bind(1, e.coord.x).bind(2, e.coord.y).bind(3, e.coord.z).bind(4, std::int64_t(e.generation));
+      ins.bind(5, std::int64_t(e.bytes)).run();
+    }
+    set_meta(db_, "integrated", std::to_string(done_), where);
+    set_meta(db_, "max_generation", std::to_string(map.max_generation()), where);
+    set_meta(db_, "stage", stage, where);
+    set_meta(db_, "checkpoint_time", utc_now(), where);
+    exec(db_, "COMMIT", where);
+  } catch (...) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    throw;
+  }
+  map.checkpoint_committed();
+  since_checkpoint_ = 0;
+  ++checkpoints_;
+  last_checkpoint_ = std::chrono::steady_clock::now();
+}
+
+void Job::frame_done(std::size_t done, BrickMap& map) {
+  done_ = done;
+  ++since_checkpoint_;
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - last_checkpoint_).count();
+  if (since_checkpoint_ >= options_.checkpoint_every || elapsed >= options_.checkpoint_seconds)
+    checkpoint(map, "integrating");
+  map.enforce_limit();
+  if (options_.kill_after > 0 && done == options_.kill_after) ::kill(::getpid(), SIGKILL);
+}
+
+void Job::integrated(BrickMap& map) { checkpoint(map, "integrated"); }
+
+void Job::finished(const std::filesystem::path& mesh) {
+  const std::string where = options_.dir.string();
+  set_meta(db_, "stage", "done", where);
+  set_meta(db_, "mesh", mesh.string(), where);
+}
+
+JobStatus Job::recorded(const std::filesystem::path& dir, std::string* config) {
+  const std::filesystem::path file = dir / "job.sqlite";
+  if (!std::filesystem::exists(file)) throw InputError(dir.string() + ": not a scalefuse job directory (no job.sqlite)");
+  sqlite3* db = open_db(file, false);
+  JobStatus st;
+  try {
+    const std::string where = file.string();
+    st.stage = meta(db, "stage", where);
+    if (st.stage.empty()) st.stage = "new";
+    st.input = meta(db, "input", where);
+    st.output = meta(db, "output", where);
+    const std::string integrated = meta(db, "integrated", where);
+    st.integrated = integrated.empty() ? 0 : std::stoull(integrated);
+    st.last_checkpoint = meta(db, "checkpoint_time", where);
+    if (config) *config = meta(db, "config", where);
+    {
+      Statement s(db, "SELECT COUNT(*) FROM inputs", where);
+      if (s.step()) st.depth_maps = std::size_t(s.integer(0));
+    }
+    {
+      Statement s(db, "SELECT COUNT(*), COALESCE(SUM(bytes), 0) FROM manifest", where);
+      if (s.step()) {
+        st.bricks = std::size_t(s.integer(0));
+        st.tile_bytes = std::uint64_t(s.integer(1));
+      }
+    }
+  } catch (...) {
+    sqlite3_close(db);
+    throw;
+  }
+  sqlite3_close(db);
+  std::error_code ec;
+  for (const char* f : {"job.sqlite", "job.sqlite-wal"}) {
+    const auto n = std::filesystem::file_size(dir / f, ec);
+    if (!ec) st.journal_bytes += n;
+  }
+  return st;
+}
+
+JobStatus Job::status(const std::filesystem::path& dir) { return recorded(dir, nullptr); }
+
+}  // namespace sf

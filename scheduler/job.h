@@ -1,0 +1,84 @@
+#pragma once
+// A fusion job on disk: the job directory that makes a long fusion resumable.
+//
+//   DIR/job.sqlite   the journal (SQLite, WAL, synchronous=FULL): effective configuration, input
+//                    list with each depth map's file size and content hash, the last committed
+//                    checkpoint (depth maps integrated, manifest brick -> tile generation), stage
+//   DIR/tiles/       brick tiles (storage/tile_file.h), b_X_Y_Z.GEN.tile
+//   DIR/mesh.ply     the final mesh (also linked or copied to the requested output)
+//
+// A checkpoint is committed in one SQLite transaction after its tiles are written and fsynced;
+// tiles it refers to are never overwritten (generations only grow) and older ones are deleted
+// only after the commit. So after a crash, kill -9 or power loss at any instant, the job holds a
+// complete checkpoint, and resuming deletes whatever was written after it.
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/fusion.h"
+#include "storage/tile_store.h"
+
+struct sqlite3;
+
+namespace sf {
+
+struct JobOptions {
+  std::filesystem::path dir;
+  std::size_t memory_limit = std::size_t{1} << 30;  // bytes of resident bricks
+  std::size_t checkpoint_every = 50;                // depth maps
+  double checkpoint_seconds = 300;
+  // Testing aid: the process kills itself (SIGKILL, no clean-up) once this many depth maps are
+  // integrated, after any checkpoint due at that point. 0 = never.
+  std::size_t kill_after = 0;
+};
+
+struct JobStatus {
+  std::string stage;  // "new", "integrating", "integrated", "done"
+  std::string input, output;
+  std::size_t depth_maps = 0, integrated = 0, bricks = 0;
+  std::uint64_t tile_bytes = 0, journal_bytes = 0;
+  std::string last_checkpoint;  // UTC time, empty if none
+};
+
+class Job : public FusionJournal {
+ public:
+  // Opens DIR (creating it and its journal if new). `config` is the effective configuration text;
+  // `input` and `output` are recorded so that `scalefuse resume DIR` can run the job again.
+  Job(JobOptions options, std::string config, std::string input, std::string output);
+  ~Job() override;
+  Job(const Job&) = delete;
+  Job& operator=(const Job&) = delete;
+
+  std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) override;
+  void frame_done(std::size_t done, BrickMap& map) override;
+  void integrated(BrickMap& map) override;
+  // Records the finished mesh (already written to `mesh`).
+  void finished(const std::filesystem::path& mesh);
+
+  const std::filesystem::path& dir() const { return options_.dir; }
+  std::size_t checkpoints_committed() const { return checkpoints_; }
+
+  // Reads a job's status without changing it. Throws InputError if DIR holds no job.
+  static JobStatus status(const std::filesystem::path& dir);
+  // The configuration, input and output a job was started with (for `scalefuse resume`).
+  static JobStatus recorded(const std::filesystem::path& dir, std::string* config);
+
+ private:
+  void checkpoint(BrickMap& map, const char* stage);
+
+  JobOptions options_;
+  std::string config_, input_, output_;
+  sqlite3* db_ = nullptr;
+  int lock_fd_ = -1;
+  std::unique_ptr<TileStore> store_;
+  std::size_t since_checkpoint_ = 0, checkpoints_ = 0, done_ = 0;
+  std::chrono::steady_clock::time_point last_checkpoint_;
+};
+
+// "1.5G", "800M", "64K", "1000000" -> bytes. Throws InputError naming `what`.
+std::size_t parse_byte_size(const std::string& text, const std::string& what);
+
+}  // namespace sf

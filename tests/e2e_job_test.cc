@@ -1,0 +1,147 @@
+// Jobs (issue 3): the mesh does not depend on threads, memory limit or interruptions (SIGKILL at
+// several points, then resume); a job refuses to resume on changed inputs or parameters, and
+// re-extracts a finished job without integrating again.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "tests/test_util.h"
+
+namespace sf {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The bundled ten bunny scans, kept small (deepest level 8) so that each run takes seconds.
+const std::string kScene = "--config " + (fs::path(SCALEFUSE_SOURCE_DIR) / "configs" / "laser.toml").string() +
+                           " --set integrate.max_level=8";
+fs::path bunny() { return fs::path(SCALEFUSE_SOURCE_DIR) / "examples" / "stanford_bunny"; }
+
+struct CliRun {
+  int code;
+  std::string output;
+};
+CliRun scalefuse(const std::string& args, const std::string& env = "") {
+  CliRun r;
+  r.code = test::run_command(env + " " + test::scalefuse_binary().string() + " " + args, &r.output);
+  return r;
+}
+
+std::string bytes_of(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// "k7.ply" (spelled out: GCC 12 warns falsely on "k" + std::to_string(n)).
+std::string numbered(const char* prefix, int n, const char* suffix) {
+  std::string s = prefix;
+  s += std::to_string(n);
+  s += suffix;
+  return s;
+}
+
+nlohmann::json json_of(const std::string& text) {
+  const std::size_t at = text.find('{');
+  return nlohmann::json::parse(at == std::string::npos ? text : text.substr(at));
+}
+
+}  // namespace
+
+TEST(Job, MeshIsByteIdenticalAcrossThreadsAndMemoryLimits) {
+  const fs::path dir = test::scratch_dir("job-determinism");
+  const fs::path ref = dir / "ref.ply";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q --threads 2 " + kScene).code, 0);
+  const std::string expected = bytes_of(ref);
+  ASSERT_GT(expected.size(), 100000u);
+  int run = 0;
+  for (const char* threads : {"1", "2"})
+    for (const char* memory : {"1G", "16M", "1M"}) {
+      const fs::path out = dir / numbered("m", run++, ".ply");
+      const CliRun r = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " -q --threads " + threads +
+                              " --memory-limit " + memory + " --checkpoint-every 3 --stats " + out.string() + ".json " +
+                              kScene);
+      ASSERT_EQ(r.code, 0) << r.output;
+      EXPECT_TRUE(bytes_of(out) == expected) << "threads " << threads << ", memory " << memory;
+    }
+  // The tightest limit really spilled: the job holds tiles of every brick.
+  const CliRun st = scalefuse("status " + (dir / "m5.ply.job").string() + " --json");
+  ASSERT_EQ(st.code, 0) << st.output;
+  const auto j = json_of(st.output);
+  EXPECT_EQ(j["stage"], "done");
+  EXPECT_EQ(j["integrated"], 10);
+  EXPECT_EQ(j["depth_maps"], 10);
+  EXPECT_GT(j["bricks"].get<int>(), 50);
+  EXPECT_GT(j["tile_bytes"].get<double>(), 1e5);
+}
+
+TEST(Job, KilledAtSeveralPointsAndResumedGivesTheSameMesh) {
+  const fs::path dir = test::scratch_dir("job-kill");
+  const fs::path ref = dir / "ref.ply";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
+  const std::string expected = bytes_of(ref);
+  for (int kill_after : {1, 4, 7, 10}) {
+    const fs::path out = dir / numbered("k", kill_after, ".ply");
+    const fs::path job = dir / numbered("k", kill_after, ".job");
+    const CliRun killed = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() +
+                                     " -q --memory-limit 4M --checkpoint-every 3 " + kScene,
+                                 "SCALEFUSE_TEST_KILL_AFTER=" + std::to_string(kill_after));
+    EXPECT_NE(killed.code, 0) << "the process was to kill itself after " << kill_after << " depth maps";
+    EXPECT_FALSE(fs::exists(out));
+    const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
+    EXPECT_EQ(st["integrated"], kill_after / 3 * 3) << "last checkpoint before the kill";
+    const CliRun resumed = scalefuse("resume " + job.string() + " -q --memory-limit 4M --checkpoint-every 3 --stats " +
+                                  out.string() + ".json");
+    ASSERT_EQ(resumed.code, 0) << resumed.output;
+    EXPECT_TRUE(bytes_of(out) == expected) << "killed after " << kill_after;
+    const auto stats = nlohmann::json::parse(bytes_of(out.string() + ".json"));
+    EXPECT_EQ(stats["resumed_at"], kill_after / 3 * 3);
+  }
+}
+
+TEST(Job, RefusesChangedParametersOrInputsAndReextractsAFinishedJob) {
+  const fs::path dir = test::scratch_dir("job-refuse");
+  const fs::path input = dir / "scans";
+  fs::copy(bunny(), input, fs::copy_options::recursive);
+  const fs::path job = dir / "job";
+  const std::string base = "fuse " + input.string() + " -o " + (dir / "m.ply").string() + " --job " + job.string() + " -q ";
+  ASSERT_EQ(scalefuse(base + kScene).code, 0);
+
+  // Another ramp changes the integrated field: refused, naming the job and the parameter.
+  CliRun r = scalefuse(base + kScene + " --set integrate.gamma=2");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("configuration differs"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("integrate.gamma"), std::string::npos) << r.output;
+
+  // Another extraction parameter reruns regularization and extraction from the tiles only.
+  r = scalefuse(base + kScene + " --set extract.min_component_triangles=0 --stats " + (dir / "s.json").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(bytes_of(dir / "s.json"))["resumed_at"], 10);
+
+  // A moved scan changes a depth map: refused.
+  {
+    std::ifstream in(input / "bun.conf");
+    std::string conf((std::istreambuf_iterator<char>(in)), {});
+    const std::string from = "bmesh bun045.ply -0.0520211", to = "bmesh bun045.ply -0.0530211";  // 1 mm
+    const auto at = conf.find(from);
+    ASSERT_NE(at, std::string::npos);
+    conf.replace(at, from.size(), to);
+    std::ofstream(input / "bun.conf") << conf;
+  }
+  r = scalefuse(base + kScene);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("inputs changed"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("bun045"), std::string::npos) << r.output;
+}
+
+TEST(Job, StatusOfAFolderWithoutAJobIsABadInput) {
+  const fs::path dir = test::scratch_dir("job-status");
+  const CliRun r = scalefuse("status " + dir.string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("not a scalefuse job directory"), std::string::npos) << r.output;
+}
+
+}  // namespace sf
