@@ -2,7 +2,10 @@
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <atomic>
 
 #include <cstdio>
 #include <cstdlib>
@@ -22,6 +25,35 @@
 namespace sf::cli {
 
 namespace {
+
+// The flag signal handlers set: the one piece of process-wide state, owned by this boundary.
+std::atomic<bool> g_stop{false};
+std::atomic<int> g_signal{0};
+extern "C" void on_stop_signal(int sig) {
+  g_signal.store(sig);
+  g_stop.store(true);
+}
+
+// Installs SIGINT/SIGTERM handlers for its lifetime.
+class StopSignals {
+ public:
+  StopSignals() {
+    g_stop = false;
+    g_signal = 0;
+    struct sigaction sa {};
+    sa.sa_handler = on_stop_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, &old_int_);
+    sigaction(SIGTERM, &sa, &old_term_);
+  }
+  ~StopSignals() {
+    sigaction(SIGINT, &old_int_, nullptr);
+    sigaction(SIGTERM, &old_term_, nullptr);
+  }
+
+ private:
+  struct sigaction old_int_ {}, old_term_ {};
+};
 
 
 nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
@@ -142,6 +174,7 @@ void run_fuse(const FuseArgs& a) {
   job_options.checkpoint_every = a.checkpoint_every;
   job_options.checkpoint_seconds = a.checkpoint_seconds;
   if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_AFTER")) job_options.kill_after = std::strtoull(k, nullptr, 10);
+  if (const char* k = std::getenv("SCALEFUSE_TEST_TERM_AFTER")) job_options.term_after = std::strtoull(k, nullptr, 10);
   const std::string identity = params.assignments(kIntegrationParameters);
   const std::string input_abs = std::filesystem::absolute(a.input).string();
   const std::string output_abs = std::filesystem::absolute(a.output).string();
@@ -168,10 +201,22 @@ void run_fuse(const FuseArgs& a) {
   hooks.progress = [&](std::string_view stage, double done, double total) { printer(stage, done, total); };
   if (!a.export_vdb.empty())
     hooks.on_regularized = [&](const BrickMap& map, const RootCube& root) { export_vdb(a.export_vdb, map, root); };
+  // SIGINT/SIGTERM stop the integration after the depth maps in flight, checkpoint, and exit.
+  auto stop_signals = std::make_unique<StopSignals>();
+  hooks.stop = &g_stop;
+  // Past integration a signal ends the process as usual: the job is checkpointed.
+  hooks.integrated = [&] { stop_signals.reset(); };
   FusionStats stats;
   Mesh mesh;
   tbb::task_arena arena(threads);
-  arena.execute([&] { mesh = fuse(*source, options, hooks, &stats, &job); });
+  try {
+    arena.execute([&] { mesh = fuse(*source, options, hooks, &stats, &job); });
+  } catch (const Interrupted& e) {
+    printer.finish();
+    throw JobInterrupted(std::string(e.what()) + "; checkpoint written; continue with: scalefuse resume " +
+                             std::filesystem::absolute(job.dir()).string(),
+                         g_signal.load());
+  }
   printer.finish();
   if (mesh.faces.empty()) throw InputError("the fused field has no surface (no zero crossing survived); nothing written");
   write_ply_mesh(a.output, mesh);

@@ -4,6 +4,7 @@
 // InputError to exit code 2 and everything else to 1.
 #include <CLI/CLI.hpp>
 
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,14 @@ struct FuseArgs {
   bool quiet = false, print_params = false;
 };
 void run_fuse(const FuseArgs& args);
+
+// A job stopped by SIGINT/SIGTERM after checkpointing: main() prints the message and exits with
+// 128 + the signal number, as a shell expects of a process ended by that signal.
+class JobInterrupted : public std::runtime_error {
+ public:
+  JobInterrupted(const std::string& what, int signal) : std::runtime_error(what), signal(signal) {}
+  int signal;
+};
 void add_job_options(CLI::App* cmd, FuseArgs& args);  // threads, memory, checkpoints, outputs
 
 void add_fuse_command(CLI::App& app);

@@ -28,6 +28,9 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     app.exit(e);
     return 2;
+  } catch (const sf::cli::JobInterrupted& e) {
+    std::fprintf(stderr, "scalefuse: %s\n", e.what());
+    return 128 + (e.signal > 0 ? e.signal : 15);
   } catch (const sf::InputError& e) {
     std::fprintf(stderr, "scalefuse: error: %s\n", e.what());
     return 2;

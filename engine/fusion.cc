@@ -167,7 +167,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
       tokens,
       tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
                                                     [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
-                                                      if (next >= frames.size()) {
+                                                      if (next >= frames.size() || (hooks.stop && hooks.stop->load())) {
                                                         fc.stop();
                                                         return nullptr;
                                                       }
@@ -192,7 +192,12 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
             if (journal) journal->frame_done(done, map);
             report(hooks.progress, "integrate", double(done), double(frames.size()));
           }));
+  if (done < frames.size()) {  // stopped
+    if (journal) journal->interrupted(done, map);
+    throw Interrupted(done, frames.size());
+  }
   if (journal) journal->integrated(map);
+  if (hooks.integrated) hooks.integrated();
   map.load_all();
   stats.triangles = integ.triangles;
   stats.contributions = integ.contributions;

@@ -1,6 +1,8 @@
 #pragma once
 // The whole fusion, input -> triangles -> bricks -> hSDF -> regularized voxels -> tetrahedra -> mesh.
 #include <array>
+#include <atomic>
+#include <stdexcept>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -61,7 +63,21 @@ struct FusionStats {
 // Hooks that let the caller see the field (e.g. to export it) without the engine knowing formats.
 struct FusionHooks {
   ProgressFn progress;
+  // Set (e.g. by a signal handler) to stop after the depth maps in flight: with a journal the
+  // integration then checkpoints and fuse() throws Interrupted.
+  const std::atomic<bool>* stop = nullptr;
+  // Called once the integration is complete (and checkpointed): `stop` is not read after this.
+  std::function<void()> integrated;
   std::function<void(const BrickMap&, const RootCube&)> on_regularized;
+};
+
+// fuse() was stopped through FusionHooks::stop; the journal holds a checkpoint of `done` maps.
+class Interrupted : public std::runtime_error {
+ public:
+  Interrupted(std::size_t done, std::size_t total)
+      : std::runtime_error("interrupted after " + std::to_string(done) + " of " + std::to_string(total) + " depth maps"),
+        done(done), total(total) {}
+  std::size_t done, total;
 };
 
 // What a job remembers of one depth map, to notice changed inputs on resume.
@@ -85,6 +101,8 @@ class FusionJournal {
   virtual void frame_done(std::size_t done, BrickMap& map) = 0;
   // Integration is complete: the final checkpoint.
   virtual void integrated(BrickMap& map) = 0;
+  // Integration stopped early (FusionHooks::stop) after `done` depth maps: a checkpoint.
+  virtual void interrupted(std::size_t done, BrickMap& map) = 0;
 };
 
 // Runs the fusion in the calling TBB arena. Throws InputError on bad input. With a journal the

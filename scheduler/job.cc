@@ -289,9 +289,15 @@ void Job::frame_done(std::size_t done, BrickMap& map) {
     checkpoint(map, "integrating");
   map.enforce_limit();
   if (options_.kill_after > 0 && done == options_.kill_after) ::kill(::getpid(), SIGKILL);
+  if (options_.term_after > 0 && done == options_.term_after) ::kill(::getpid(), SIGTERM);
 }
 
 void Job::integrated(BrickMap& map) { checkpoint(map, "integrated"); }
+
+void Job::interrupted(std::size_t done, BrickMap& map) {
+  done_ = done;
+  checkpoint(map, "integrating");
+}
 
 void Job::finished(const std::filesystem::path& mesh) {
   const std::string where = options_.dir.string();

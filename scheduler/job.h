@@ -33,6 +33,8 @@ struct JobOptions {
   // Testing aid: the process kills itself (SIGKILL, no clean-up) once this many depth maps are
   // integrated, after any checkpoint due at that point. 0 = never.
   std::size_t kill_after = 0;
+  // Testing aid: the process sends itself SIGTERM once this many depth maps are integrated. 0 = never.
+  std::size_t term_after = 0;
 };
 
 struct JobStatus {
@@ -55,6 +57,7 @@ class Job : public FusionJournal {
   std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) override;
   void frame_done(std::size_t done, BrickMap& map) override;
   void integrated(BrickMap& map) override;
+  void interrupted(std::size_t done, BrickMap& map) override;
   // Records the finished mesh (already written to `mesh`).
   void finished(const std::filesystem::path& mesh);
 

@@ -102,6 +102,24 @@ TEST(Job, KilledAtSeveralPointsAndResumedGivesTheSameMesh) {
   }
 }
 
+TEST(Job, SigtermCheckpointsExitsAndResumesToTheSameMesh) {
+  const fs::path dir = test::scratch_dir("job-term");
+  const fs::path ref = dir / "ref.ply", out = dir / "t.ply", job = dir / "t.job";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
+  const CliRun stopped = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() +
+                                       " -q --threads 2 --checkpoint-every 100 " + kScene,
+                                   "SCALEFUSE_TEST_TERM_AFTER=4");
+  EXPECT_EQ(stopped.code, 128 + 15) << stopped.output;
+  EXPECT_NE(stopped.output.find("checkpoint written; continue with: scalefuse resume"), std::string::npos) << stopped.output;
+  EXPECT_FALSE(fs::exists(out));
+  // The depth maps in flight when the signal came were integrated before the checkpoint.
+  const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
+  EXPECT_GE(st["integrated"].get<int>(), 4);
+  EXPECT_LT(st["integrated"].get<int>(), 10);
+  ASSERT_EQ(scalefuse("resume " + job.string() + " -q").code, 0);
+  EXPECT_TRUE(bytes_of(out) == bytes_of(ref));
+}
+
 TEST(Job, RefusesChangedParametersOrInputsAndReextractsAFinishedJob) {
   const fs::path dir = test::scratch_dir("job-refuse");
   const fs::path input = dir / "scans";
