@@ -164,7 +164,14 @@ void run_fuse(const FuseArgs& a) {
   if (a.print_params) return;
 
   const int threads = a.threads > 0 ? a.threads : tbb::info::default_concurrency();
-  auto source = open_input(a.input, options.input);
+  std::vector<std::unique_ptr<FrameSource>> parts;
+  parts.push_back(open_input(a.input, options.input));
+  std::string input_abs = std::filesystem::absolute(a.input).string();
+  for (const std::string& more : a.more_inputs) {
+    parts.push_back(open_input(more, options.input));
+    input_abs += "\n" + std::filesystem::absolute(more).string();
+  }
+  auto source = concatenate_inputs(std::move(parts));
 
   // The job directory: given, or next to the output.
   const bool implicit_job = a.job.empty();
@@ -173,10 +180,10 @@ void run_fuse(const FuseArgs& a) {
   job_options.memory_limit = a.memory_limit.empty() ? default_memory_limit() : parse_byte_size(a.memory_limit, "--memory-limit");
   job_options.checkpoint_every = a.checkpoint_every;
   job_options.checkpoint_seconds = a.checkpoint_seconds;
+  job_options.allow_new_inputs = a.add;
   if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_AFTER")) job_options.kill_after = std::strtoull(k, nullptr, 10);
   if (const char* k = std::getenv("SCALEFUSE_TEST_TERM_AFTER")) job_options.term_after = std::strtoull(k, nullptr, 10);
   const std::string identity = params.assignments(kIntegrationParameters);
-  const std::string input_abs = std::filesystem::absolute(a.input).string();
   const std::string output_abs = std::filesystem::absolute(a.output).string();
   if (implicit_job && std::filesystem::exists(job_options.dir / "job.sqlite")) {
     // An implicit job left by an earlier run with other settings is stale: start over.

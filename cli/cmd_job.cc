@@ -2,6 +2,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <sstream>
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.h"
@@ -12,11 +13,19 @@ namespace sf::cli {
 
 namespace {
 
-void run_resume(const std::string& dir, FuseArgs args) {
+// The recorded job as `fuse` arguments, plus `more` input folders (scalefuse add).
+void rerun(const std::string& dir, FuseArgs args, const std::string& more) {
   const JobStatus st = Job::recorded(dir, nullptr);
   if (st.input.empty() || st.output.empty())
     throw InputError(dir + ": the job never got past its start; run fuse again");
-  args.input = st.input;
+  std::istringstream inputs(st.input);
+  std::string line;
+  std::getline(inputs, args.input);
+  while (std::getline(inputs, line)) args.more_inputs.push_back(line);
+  if (!more.empty()) {
+    args.more_inputs.push_back(more);
+    args.add = true;
+  }
   args.output = st.output;
   args.job = dir;
   args.config = (std::filesystem::path(dir) / "config.toml").string();
@@ -36,7 +45,10 @@ void run_status(const std::string& dir, bool json) {
   }
   std::printf("job          %s\n", std::filesystem::absolute(dir).c_str());
   std::printf("stage        %s\n", st.stage.c_str());
-  std::printf("input        %s\n", st.input.c_str());
+  std::string inputs = st.input;
+  for (std::size_t at = inputs.find('\n'); at != std::string::npos; at = inputs.find('\n', at + 14))
+    inputs.replace(at, 1, "\n             ");
+  std::printf("input        %s\n", inputs.c_str());
   std::printf("output       %s\n", st.output.c_str());
   std::printf("depth maps   %zu of %zu integrated (at the last checkpoint%s%s)\n", st.integrated, st.depth_maps,
               st.last_checkpoint.empty() ? "" : ", ", st.last_checkpoint.c_str());
@@ -53,7 +65,16 @@ void add_job_commands(CLI::App& app) {
   CLI::App* resume = app.add_subcommand("resume", "continue a job from its last checkpoint (same inputs and parameters)");
   resume->add_option("dir", *resume_dir, "job directory")->required();
   add_job_options(resume, *args);
-  resume->callback([resume_dir, args] { run_resume(*resume_dir, *args); });
+  resume->callback([resume_dir, args] { rerun(*resume_dir, *args, ""); });
+
+  auto add_dir = std::make_shared<std::string>(), add_input = std::make_shared<std::string>();
+  auto add_args = std::make_shared<FuseArgs>();
+  CLI::App* add = app.add_subcommand(
+      "add", "integrate more depth maps into a job (same octree; regularization and extraction run again)");
+  add->add_option("dir", *add_dir, "job directory")->required();
+  add->add_option("input", *add_input, "folder with the new depth maps (any supported format)")->required();
+  add_job_options(add, *add_args);
+  add->callback([add_dir, add_input, add_args] { rerun(*add_dir, *add_args, *add_input); });
 
   auto status_dir = std::make_shared<std::string>();
   auto json = std::make_shared<bool>(false);

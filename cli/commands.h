@@ -15,6 +15,8 @@ struct FuseArgs {
   std::string input, output, config, export_vdb, stats_json, job, memory_limit;
   std::string format, colmap_maps, mve_depth, mve_image, mve_confidence, bbox;
   std::vector<std::string> sets;
+  std::vector<std::string> more_inputs;  // further input folders after `input` (a grown job)
+  bool add = false;                      // scalefuse add: the inputs may extend the job's
   int threads = 0;
   std::size_t checkpoint_every = 50;
   double checkpoint_seconds = 300;

@@ -125,7 +125,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     DepthFrame f = source.load(frames[i]);
     if (journal) {
       FrameIdentity& id = identities[i];
-      id.name = source.frame_name(frames[i]);
+      id.name = std::filesystem::absolute(source.frame_name(frames[i])).string();
       std::error_code ec;
       const auto size = std::filesystem::file_size(id.name, ec);
       id.file_size = ec ? 0 : std::uint64_t(size);
@@ -146,7 +146,9 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   });
   if (samples == 0) throw InputError("the input holds no valid depth samples" + std::string(clip ? " inside octree.bbox" : ""));
   stats.samples = samples;
-  const RootCube root = clip ? root_cube_for(*clip, 0.0) : root_cube_for(bounds, options.octree.padding);
+  const std::optional<RootCube> job_root = journal ? journal->fixed_root() : std::nullopt;
+  const RootCube root =
+      job_root ? *job_root : (clip ? root_cube_for(*clip, 0.0) : root_cube_for(bounds, options.octree.padding));
   stats.root = root;
   end_stage("bounds");
 

@@ -93,6 +93,9 @@ struct FrameIdentity {
 class FusionJournal {
  public:
   virtual ~FusionJournal() = default;
+  // The root cube of an existing job (depth maps added later must land in the same octree);
+  // nullopt for a new job, whose root comes from the data.
+  virtual std::optional<RootCube> fixed_root() const = 0;
   // Returns how many depth maps (a prefix, in input order) the map already holds after restoring
   // it from the last checkpoint; 0 for a new job. Throws InputError if the job was started on
   // other inputs or another configuration.

@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "engine/error.h"
+#include "engine/parameters.h"
 
 namespace sf {
 namespace {
@@ -178,6 +179,21 @@ Job::~Job() {
   if (lock_fd_ >= 0) ::close(lock_fd_);
 }
 
+static RootCube parse_root(const std::string& text, const std::string& where) {
+  const std::vector<double> v = parse_number_list(text, 4, where + ": recorded root cube");
+  RootCube r;
+  r.min = Eigen::Vector3d(v[0], v[1], v[2]);
+  r.size = v[3];
+  return r;
+}
+
+std::optional<RootCube> Job::fixed_root() const {
+  const std::string where = options_.dir.string();
+  const std::string text = meta(db_, "root", where);
+  if (text.empty()) return std::nullopt;
+  return parse_root(text, where);
+}
+
 std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) {
   const std::string where = options_.dir.string();
   map.attach_store(store_.get(), options_.memory_limit);
@@ -211,6 +227,9 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
   if (old_config != config_)
     throw InputError(where + ": the configuration differs from the job's (" + first_difference(old_config, config_) +
                      "); use a new --job directory");
+  if (!options_.allow_new_inputs && meta(db_, "input", where) != input_)
+    throw InputError(where + ": the job was started on " + meta(db_, "input", where) + ", not " + input_ +
+                     "; use a new --job directory");
   std::size_t count = 0;
   {
     Statement s(db_, "SELECT idx, name, size, hash FROM inputs ORDER BY idx", where);
@@ -227,9 +246,22 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
       ++count;
     }
   }
-  if (count != frames.size())
+  if (count != frames.size() && !(options_.allow_new_inputs && count < frames.size()))
     throw InputError(where + ": the inputs changed: the job has " + std::to_string(count) + " depth maps, the input " +
                      std::to_string(frames.size()) + "; use a new --job directory");
+  if (count < frames.size()) {  // scalefuse add: record the new depth maps
+    exec(db_, "BEGIN IMMEDIATE", where);
+    Statement ins(db_, "INSERT INTO inputs(idx, name, size, hash) VALUES(?1, ?2, ?3, ?4)", where);
+    for (std::size_t i = count; i < frames.size(); ++i) {
+      char hash[17];
+      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(frames[i].hash));
+      ins.bind(1, std::int64_t(i)).bind(2, frames[i].name).bind(3, std::int64_t(frames[i].file_size)).bind(4, hash);
+      ins.run();
+    }
+    set_meta(db_, "stage", "integrating", where);
+    set_meta(db_, "input", input_, where);
+    exec(db_, "COMMIT", where);
+  }
   if (meta(db_, "root", where) != root_text(root) || meta(db_, "brick_level", where) != std::to_string(map.brick_level()))
     throw InputError(where + ": the root cube or brick level differs from the job's");
   // Restore the last checkpoint.

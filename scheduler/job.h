@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -35,11 +36,13 @@ struct JobOptions {
   std::size_t kill_after = 0;
   // Testing aid: the process sends itself SIGTERM once this many depth maps are integrated. 0 = never.
   std::size_t term_after = 0;
+  // `scalefuse add`: the inputs may extend the job's (its depth maps first, unchanged).
+  bool allow_new_inputs = false;
 };
 
 struct JobStatus {
   std::string stage;  // "new", "integrating", "integrated", "done"
-  std::string input, output;
+  std::string input, output;  // input: the job's input folders, one per line
   std::size_t depth_maps = 0, integrated = 0, bricks = 0;
   std::uint64_t tile_bytes = 0, journal_bytes = 0;
   std::string last_checkpoint;  // UTC time, empty if none
@@ -48,12 +51,14 @@ struct JobStatus {
 class Job : public FusionJournal {
  public:
   // Opens DIR (creating it and its journal if new). `config` is the effective configuration text;
-  // `input` and `output` are recorded so that `scalefuse resume DIR` can run the job again.
+  // `input` (folders, one per line) and `output` are recorded so that `scalefuse resume DIR` can
+  // run the job again.
   Job(JobOptions options, std::string config, std::string input, std::string output);
   ~Job() override;
   Job(const Job&) = delete;
   Job& operator=(const Job&) = delete;
 
+  std::optional<RootCube> fixed_root() const override;
   std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) override;
   void frame_done(std::size_t done, BrickMap& map) override;
   void integrated(BrickMap& map) override;

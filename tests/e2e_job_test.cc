@@ -155,6 +155,48 @@ TEST(Job, RefusesChangedParametersOrInputsAndReextractsAFinishedJob) {
   EXPECT_NE(r.output.find("bun045"), std::string::npos) << r.output;
 }
 
+// `scalefuse add`: six scans, then the other four into the same job, give the mesh of all ten
+// fused at once (same root cube, fixed by --bbox).
+TEST(Job, AddingDepthMapsToAFinishedJobEqualsFusingThemAllAtOnce) {
+  const fs::path dir = test::scratch_dir("job-add");
+  std::ifstream conf_in(bunny() / "bun.conf");
+  std::string camera, line;
+  std::getline(conf_in, camera);
+  std::vector<std::string> scans;
+  while (std::getline(conf_in, line))
+    if (line.rfind("bmesh ", 0) == 0) scans.push_back(line);
+  ASSERT_EQ(scans.size(), 10u);
+  auto make_folder = [&](const fs::path& folder, std::size_t from, std::size_t to) {
+    fs::create_directories(folder);
+    std::ofstream conf(folder / "bun.conf");
+    conf << camera << "\n";
+    for (std::size_t i = from; i < to; ++i) {
+      conf << scans[i] << "\n";
+      const std::string file = scans[i].substr(6, scans[i].find(' ', 6) - 6);
+      fs::copy_file(bunny() / file, folder / file);
+    }
+  };
+  make_folder(dir / "all", 0, 10);
+  make_folder(dir / "first", 0, 6);
+  make_folder(dir / "more", 6, 10);
+  const std::string scene = kScene + " --bbox=-0.11,0.02,-0.08,0.08,0.2,0.08 -q";
+  ASSERT_EQ(scalefuse("fuse " + (dir / "all").string() + " -o " + (dir / "all.ply").string() + " " + scene).code, 0);
+  const fs::path job = dir / "job", out = dir / "grown.ply";
+  ASSERT_EQ(scalefuse("fuse " + (dir / "first").string() + " -o " + out.string() + " --job " + job.string() + " " + scene).code, 0);
+  EXPECT_FALSE(bytes_of(out) == bytes_of(dir / "all.ply"));
+  const CliRun added = scalefuse("add " + job.string() + " " + (dir / "more").string() + " -q --stats " +
+                                 (dir / "add.json").string());
+  ASSERT_EQ(added.code, 0) << added.output;
+  EXPECT_TRUE(bytes_of(out) == bytes_of(dir / "all.ply"));
+  EXPECT_EQ(nlohmann::json::parse(bytes_of(dir / "add.json"))["resumed_at"], 6);
+  const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
+  EXPECT_EQ(st["depth_maps"], 10);
+  EXPECT_EQ(st["integrated"], 10);
+  // The grown job resumes like any other: a plain resume changes nothing.
+  ASSERT_EQ(scalefuse("resume " + job.string() + " -q").code, 0);
+  EXPECT_TRUE(bytes_of(out) == bytes_of(dir / "all.ply"));
+}
+
 TEST(Job, StatusOfAFolderWithoutAJobIsABadInput) {
   const fs::path dir = test::scratch_dir("job-status");
   const CliRun r = scalefuse("status " + dir.string());

@@ -1,5 +1,7 @@
 #include "engine/input/frame_source.h"
 
+#include <stdexcept>
+
 #include <cmath>
 #include <fstream>
 #include <string>
@@ -78,6 +80,51 @@ std::unique_ptr<FrameSource> open_input(const fs::path& input, const InputOption
   if (format == "mve") return open_mve(input, options);
   if (format == "rgbd") return open_rgbd(input, options);
   return open_rangegrid(input, options);
+}
+
+namespace {
+
+class ConcatenatedSource : public FrameSource {
+ public:
+  explicit ConcatenatedSource(std::vector<std::unique_ptr<FrameSource>> parts) : parts_(std::move(parts)) {
+    for (const auto& p : parts_) {
+      starts_.push_back(total_);
+      total_ += p->size();
+    }
+  }
+  std::string format() const override {
+    std::string f = parts_.front()->format();
+    for (const auto& p : parts_)
+      if (p->format() != f) return "mixed";
+    return f;
+  }
+  std::size_t size() const override { return total_; }
+  std::string frame_name(std::size_t i) const override {
+    const std::size_t k = part_of(i);
+    return parts_[k]->frame_name(i - starts_[k]);
+  }
+  DepthFrame load(std::size_t i) const override {
+    const std::size_t k = part_of(i);
+    return parts_[k]->load(i - starts_[k]);
+  }
+
+ private:
+  std::size_t part_of(std::size_t i) const {
+    std::size_t k = 0;
+    while (k + 1 < starts_.size() && starts_[k + 1] <= i) ++k;
+    return k;
+  }
+  std::vector<std::unique_ptr<FrameSource>> parts_;
+  std::vector<std::size_t> starts_;
+  std::size_t total_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<FrameSource> concatenate_inputs(std::vector<std::unique_ptr<FrameSource>> parts) {
+  if (parts.empty()) throw std::invalid_argument("concatenate_inputs: no inputs");
+  if (parts.size() == 1) return std::move(parts.front());
+  return std::make_unique<ConcatenatedSource>(std::move(parts));
 }
 
 }  // namespace sf

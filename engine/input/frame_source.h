@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "engine/depth_frame.h"
 
@@ -36,5 +37,8 @@ class FrameSource {
 // Detects the format of `input` (unless options.format says it) and opens it. Throws InputError if
 // the folder is missing, unrecognised or holds no depth maps.
 std::unique_ptr<FrameSource> open_input(const std::filesystem::path& input, const InputOptions& options);
+
+// The depth maps of several inputs, one after the other (a job that grew with `scalefuse add`).
+std::unique_ptr<FrameSource> concatenate_inputs(std::vector<std::unique_ptr<FrameSource>> parts);
 
 }  // namespace sf
