@@ -81,6 +81,9 @@ nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
   for (const auto& t : s.times) times[t.stage] = t.seconds;
   j["seconds"] = times;
   j["peak_rss_bytes"] = s.peak_rss_bytes;
+  j["peak_rss_integrate_bytes"] = s.peak_rss_integrate_bytes;
+  j["spill"] = {{"bricks_spilled", s.spill.spilled}, {"bricks_reloaded", s.spill.reloaded},
+                {"bytes_written", s.spill.bytes_written}, {"bytes_read", s.spill.bytes_read}};
   return j;
 }
 

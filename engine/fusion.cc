@@ -200,6 +200,8 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   }
   if (journal) journal->integrated(map);
   if (hooks.integrated) hooks.integrated();
+  stats.peak_rss_integrate_bytes = peak_rss_bytes();
+  stats.spill = map.spill_stats();
   map.load_all();
   stats.triangles = integ.triangles;
   stats.contributions = integ.contributions;

@@ -58,6 +58,8 @@ struct FusionStats {
   ExtractStats extract;
   std::vector<StageTime> times;
   std::size_t peak_rss_bytes = 0;
+  std::size_t peak_rss_integrate_bytes = 0;  // peak RSS when integration ended (before the whole field is loaded)
+  SpillStats spill;                          // bricks spilled to and reloaded from tiles during integration
 };
 
 // Hooks that let the caller see the field (e.g. to export it) without the engine knowing formats.
