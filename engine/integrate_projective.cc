@@ -204,156 +204,195 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
       }
     });
   });
+  // Work items (tile, level), ordered by the brick around their middle ("home"), so that items
+  // run brick region by brick region.
+  const Eigen::Matrix3d Rt = R.transpose();
+  const int brick_level = map.brick_level();
   struct Item {
+    std::uint64_t home;
     int tile, level;
   };
   std::vector<Item> items;
+  const double brick_size = root.cell_size(brick_level);
+  const std::int64_t last_brick = (std::int64_t{1} << brick_level) - 1;
   for (int tile = 0; tile < TX * TY; ++tile)
-    for (int l = 0; l < L; ++l)
-      if (tile_levels[std::size_t(tile) * L + l].zmin <= tile_levels[std::size_t(tile) * L + l].zmax)
-        items.push_back({tile, l});
-
-  const Eigen::Matrix3d Rt = R.transpose();
-  const int brick_level = map.brick_level();
-  std::atomic<std::size_t> contributions{0};
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, items.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::size_t local = 0;
-    BlockCache cache(map);
-    for (std::size_t it = range.begin(); it != range.end(); ++it) {
-      const int level = items[it].level, tile = items[it].tile;
-      const int tx = tile % TX, ty = tile / TX;
-      const int c0 = tx * kTile, c1 = std::min(QW, c0 + kTile), r0 = ty * kTile, r1 = std::min(QH, r0 + kTile);
-      const TileLevel& tl = tile_levels[std::size_t(tile) * L + level];
-      const double h = root.cell_size(level);
-      const double margin = 1e-3 * h;
-      double ramp_of[L];  // by the owner's level
-      for (int lt = level; lt < L; ++lt) ramp_of[lt] = insertion_ramp(options, root, level, lt);
-      // The tile's frustum slab as half-spaces a . x_cam + b >= 0, moved to world coordinates.
-      const double pm = 1e-3;  // pixels
-      const double u0 = c0 + 0.5 - pm, u1 = c1 + 0.5 + pm, v0 = r0 + 0.5 - pm, v1 = r1 + 0.5 + pm;
-      const double zlo = std::max(tl.zmin - tl.ramp - margin, 1e-9), zhi = tl.zmax + tl.ramp + margin;
-      const Vector3d a_cam[6] = {{sensor.fx, 0, sensor.cx - u0}, {-sensor.fx, 0, u1 - sensor.cx},
-                                 {0, sensor.fy, sensor.cy - v0}, {0, -sensor.fy, v1 - sensor.cy},
-                                 {0, 0, 1},                      {0, 0, -1}};
-      const double b_cam[6] = {0, 0, 0, 0, -zlo, zhi};
-      HalfSpace planes[8];
-      for (int k = 0; k < 6; ++k) {
-        const Vector3d m = Rt * a_cam[k];
-        planes[k] = {m, -(a_cam[k].dot(sensor.t) + b_cam[k])};
+    for (int l = 0; l < L; ++l) {
+      const TileLevel& tl = tile_levels[std::size_t(tile) * L + l];
+      if (!(tl.zmin <= tl.zmax)) continue;
+      const double u = (tile % TX) * kTile + 0.5 * kTile + 0.5, v = (tile / TX) * kTile + 0.5 * kTile + 0.5;
+      const double z = 0.5 * (tl.zmin + tl.zmax);
+      const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
+      const Vector3d X = Rt * (xc - sensor.t);
+      std::uint64_t home = 0;
+      for (int a = 2; a >= 0; --a) {
+        const auto b = std::clamp<std::int64_t>(std::int64_t(std::floor((X[a] - root.min[a]) / brick_size)), 0,
+                                                last_brick);
+        home = (home << 21) | std::uint64_t(b);
       }
-      // Along the tile normal: the prisms lie within the hull of their corners P +- ramp dir,
-      // up to the bulge of a perspective cap (ramp x (pixel angle)^2 / 8, far below the margin).
-      const Vector3d& tn = tile_normal[tile];
-      planes[6] = {tn, tl.smin - margin};
-      planes[7] = {-tn, -tl.smax - margin};
-      Vector3d lo = Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-      for (int k = 0; k < 8; ++k) {
-        const double u = (k & 1) ? u1 : u0, v = (k & 2) ? v1 : v0, z = (k & 4) ? zhi : zlo;
-        const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
-        const Vector3d X = Rt * (xc - sensor.t);
-        lo = lo.cwiseMin(X);
-        hi = hi.cwiseMax(X);
-      }
-      // March along the world axis closest to the tile's central line of sight.
-      const double uc = 0.5 * (u0 + u1), vc = 0.5 * (v0 + v1);
-      const Vector3d ray = Rt * Vector3d((uc - sensor.cx) / sensor.fx, (vc - sensor.cy) / sensor.fy, 1.0);
-      int ax = 0;
-      ray.cwiseAbs().maxCoeff(&ax);
-      const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
-      const double pad = margin;
-      const std::int64_t n_cells = std::int64_t{1} << level;
-      auto index_range = [&](int axis_id, double a, double b, std::int64_t* i0, std::int64_t* i1) {
-        *i0 = std::max<std::int64_t>(0, std::int64_t(std::ceil((a - pad - root.min[axis_id]) / h)));
-        *i1 = std::min<std::int64_t>(n_cells, std::int64_t(std::floor((b + pad - root.min[axis_id]) / h)));
-      };
-      std::int64_t a0, a1, b0, b1, cc0, cc1;
-      index_range(ax, lo[ax], hi[ax], &a0, &a1);
-      index_range(bx, lo[bx], hi[bx], &b0, &b1);
-      index_range(cx, lo[cx], hi[cx], &cc0, &cc1);
-      const std::uint32_t block_mask = ~((1u << block_log(level, brick_level)) - 1);
-      for (std::int64_t ib = b0; ib <= b1; ++ib)
-        for (std::int64_t ic = cc0; ic <= cc1; ++ic) {
-          Vector3d base;
-          base[ax] = root.min[ax];
-          base[bx] = root.min[bx] + h * double(ib);
-          base[cx] = root.min[cx] + h * double(ic);
-          double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // a0..a1 in index space
-          bool empty = false;
-          for (const HalfSpace& hs : planes) {
-            const double v = hs.m.dot(base) - hs.k, ma = hs.m[ax];
-            if (ma == 0) {
-              if (v < 0) {
-                empty = true;
-                break;
-              }
-            } else if (ma > 0) {
-              tmin = std::max(tmin, -v / ma);
-            } else {
-              tmax = std::min(tmax, -v / ma);
-            }
-          }
-          if (empty || tmin > tmax) continue;
-          tmin = std::max(tmin, double(a0 - 1) * h);  // finite before the integer casts
-          tmax = std::min(tmax, double(a1 + 1) * h);
-          const std::int64_t i0 = std::max<std::int64_t>(a0, std::int64_t(std::ceil(tmin / h)));
-          const std::int64_t i1 = std::min<std::int64_t>(a1, std::int64_t(std::floor(tmax / h)));
-          for (std::int64_t ia = i0; ia <= i1; ++ia) {
-            Vector3d X = base;
-            X[ax] += h * double(ia);
-            const Vector3d xs = R * X + sensor.t;
-            if (!(xs.z() > 0)) continue;
-            const Vector2d q = pixel_of(sensor, xs);
-            const int col = fast_floor(q.x() - 0.5), row = fast_floor(q.y() - 0.5);
-            if (!(col >= c0 && col < c1 && row >= r0 && row < r1)) continue;  // another tile's voxel
-            // The owner: one of the quad's triangles (the likelier first), or, on the quad's left
-            // or top border, one of the neighbouring quads' (edge functions give a shared edge to
-            // one side only).
-            const GridTriangle* owner = nullptr;
-            double bary[3] = {0, 0, 0};
-            auto try_triangle = [&](std::int32_t t) {
-              if (t < 0 || !tris[t].ok) return false;
-              const GridTriangle& g = tris[t];
-              const Vector2d qv[3] = {frame.image_pos[g.idx[0]].cast<double>(), frame.image_pos[g.idx[1]].cast<double>(),
-                                      frame.image_pos[g.idx[2]].cast<double>()};
-              if (!g.own.owns(qv, q, bary)) return false;
-              owner = &g;
-              return true;
-            };
-            auto try_quad = [&](int qr, int qc, bool first_guess) {
-              if (qr < 0 || qc < 0) return false;
-              const Quad& qd = quad[std::size_t(qr) * QW + qc];
-              const int first = first_guess ? 0 : 1;
-              return try_triangle(qd.tri[first]) || try_triangle(qd.tri[1 - first]);
-            };
-            const Quad& here = quad[std::size_t(row) * QW + col];
-            const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
-            if (!try_quad(row, col, guess)) {
-              const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
-              if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
-                    (left && top && try_quad(row - 1, col - 1, true))))
-                continue;
-            }
-            if (level < owner->coarsest || level > owner->level) continue;
-            const double ramp = ramp_of[owner->level];
-            const Vector3d dir = (X - centre).normalized();
-            VoxelSample v;
-            if (!voxel_sample(frame, owner->idx, owner->normal, frame.position[owner->idx[0]].cast<double>(), bary, X, dir,
-                              ramp, options, &v))
-              continue;
-            std::int64_t idx[3];
-            idx[ax] = ia;
-            idx[bx] = ib;
-            idx[cx] = ic;
-            const VoxelKey key = VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
-            const VoxelKey origin =
-                VoxelKey::make(level, key.x() & block_mask, key.y() & block_mask, key.z() & block_mask);
-            accumulate(cache.voxel(key, origin), v.distance, v.weight, v.has_colour ? v.colour : nullptr);
-            ++local;
-          }
-        }
+      items.push_back({home, tile, l});
     }
-    contributions.fetch_add(local, std::memory_order_relaxed);
+  std::sort(items.begin(), items.end(), [](const Item& a, const Item& b) {
+    return a.home != b.home ? a.home < b.home : (a.tile != b.tile ? a.tile < b.tile : a.level < b.level);
   });
+  // When bricks can spill, run the items in chunks of a few home bricks and let the map spill
+  // between chunks: a depth map that sees the whole scene (a far view) then never needs all its
+  // bricks in memory at once. Chunk boundaries are safe points: no block pointer is live there.
+  constexpr std::size_t kHomeBricksPerChunk = 8;
+  std::vector<std::size_t> chunk_ends;
+  if (map.spills()) {
+    std::size_t homes = 0;
+    for (std::size_t i = 0; i < items.size(); ++i) {
+      if (i > 0 && items[i].home != items[i - 1].home && ++homes % kHomeBricksPerChunk == 0) chunk_ends.push_back(i);
+    }
+  }
+  chunk_ends.push_back(items.size());
+
+  std::atomic<std::size_t> contributions{0};
+  std::size_t chunk_begin = 0;
+  for (std::size_t chunk_end : chunk_ends) {
+    if (map.spills()) map.next_epoch();
+    const tbb::blocked_range<std::size_t> chunk(chunk_begin, chunk_end, 1);
+    tbb::parallel_for(chunk, [&](const tbb::blocked_range<std::size_t>& range) {
+      std::size_t local = 0;
+      BlockCache cache(map);
+      for (std::size_t it = range.begin(); it != range.end(); ++it) {
+        const int level = items[it].level, tile = items[it].tile;
+        const int tx = tile % TX, ty = tile / TX;
+        const int c0 = tx * kTile, c1 = std::min(QW, c0 + kTile), r0 = ty * kTile, r1 = std::min(QH, r0 + kTile);
+        const TileLevel& tl = tile_levels[std::size_t(tile) * L + level];
+        const double h = root.cell_size(level);
+        const double margin = 1e-3 * h;
+        double ramp_of[L];  // by the owner's level
+        for (int lt = level; lt < L; ++lt) ramp_of[lt] = insertion_ramp(options, root, level, lt);
+        // The tile's frustum slab as half-spaces a . x_cam + b >= 0, moved to world coordinates.
+        const double pm = 1e-3;  // pixels
+        const double u0 = c0 + 0.5 - pm, u1 = c1 + 0.5 + pm, v0 = r0 + 0.5 - pm, v1 = r1 + 0.5 + pm;
+        const double zlo = std::max(tl.zmin - tl.ramp - margin, 1e-9), zhi = tl.zmax + tl.ramp + margin;
+        const Vector3d a_cam[6] = {{sensor.fx, 0, sensor.cx - u0}, {-sensor.fx, 0, u1 - sensor.cx},
+                                   {0, sensor.fy, sensor.cy - v0}, {0, -sensor.fy, v1 - sensor.cy},
+                                   {0, 0, 1},                      {0, 0, -1}};
+        const double b_cam[6] = {0, 0, 0, 0, -zlo, zhi};
+        HalfSpace planes[8];
+        for (int k = 0; k < 6; ++k) {
+          const Vector3d m = Rt * a_cam[k];
+          planes[k] = {m, -(a_cam[k].dot(sensor.t) + b_cam[k])};
+        }
+        // Along the tile normal: the prisms lie within the hull of their corners P +- ramp dir,
+        // up to the bulge of a perspective cap (ramp x (pixel angle)^2 / 8, far below the margin).
+        const Vector3d& tn = tile_normal[tile];
+        planes[6] = {tn, tl.smin - margin};
+        planes[7] = {-tn, -tl.smax - margin};
+        Vector3d lo = Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+        for (int k = 0; k < 8; ++k) {
+          const double u = (k & 1) ? u1 : u0, v = (k & 2) ? v1 : v0, z = (k & 4) ? zhi : zlo;
+          const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
+          const Vector3d X = Rt * (xc - sensor.t);
+          lo = lo.cwiseMin(X);
+          hi = hi.cwiseMax(X);
+        }
+        // March along the world axis closest to the tile's central line of sight.
+        const double uc = 0.5 * (u0 + u1), vc = 0.5 * (v0 + v1);
+        const Vector3d ray = Rt * Vector3d((uc - sensor.cx) / sensor.fx, (vc - sensor.cy) / sensor.fy, 1.0);
+        int ax = 0;
+        ray.cwiseAbs().maxCoeff(&ax);
+        const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
+        const double pad = margin;
+        const std::int64_t n_cells = std::int64_t{1} << level;
+        auto index_range = [&](int axis_id, double a, double b, std::int64_t* i0, std::int64_t* i1) {
+          *i0 = std::max<std::int64_t>(0, std::int64_t(std::ceil((a - pad - root.min[axis_id]) / h)));
+          *i1 = std::min<std::int64_t>(n_cells, std::int64_t(std::floor((b + pad - root.min[axis_id]) / h)));
+        };
+        std::int64_t a0, a1, b0, b1, cc0, cc1;
+        index_range(ax, lo[ax], hi[ax], &a0, &a1);
+        index_range(bx, lo[bx], hi[bx], &b0, &b1);
+        index_range(cx, lo[cx], hi[cx], &cc0, &cc1);
+        const std::uint32_t block_mask = ~((1u << block_log(level, brick_level)) - 1);
+        for (std::int64_t ib = b0; ib <= b1; ++ib)
+          for (std::int64_t ic = cc0; ic <= cc1; ++ic) {
+            Vector3d base;
+            base[ax] = root.min[ax];
+            base[bx] = root.min[bx] + h * double(ib);
+            base[cx] = root.min[cx] + h * double(ic);
+            double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // a0..a1 in index space
+            bool empty = false;
+            for (const HalfSpace& hs : planes) {
+              const double v = hs.m.dot(base) - hs.k, ma = hs.m[ax];
+              if (ma == 0) {
+                if (v < 0) {
+                  empty = true;
+                  break;
+                }
+              } else if (ma > 0) {
+                tmin = std::max(tmin, -v / ma);
+              } else {
+                tmax = std::min(tmax, -v / ma);
+              }
+            }
+            if (empty || tmin > tmax) continue;
+            tmin = std::max(tmin, double(a0 - 1) * h);  // finite before the integer casts
+            tmax = std::min(tmax, double(a1 + 1) * h);
+            const std::int64_t i0 = std::max<std::int64_t>(a0, std::int64_t(std::ceil(tmin / h)));
+            const std::int64_t i1 = std::min<std::int64_t>(a1, std::int64_t(std::floor(tmax / h)));
+            for (std::int64_t ia = i0; ia <= i1; ++ia) {
+              Vector3d X = base;
+              X[ax] += h * double(ia);
+              const Vector3d xs = R * X + sensor.t;
+              if (!(xs.z() > 0)) continue;
+              const Vector2d q = pixel_of(sensor, xs);
+              const int col = fast_floor(q.x() - 0.5), row = fast_floor(q.y() - 0.5);
+              if (!(col >= c0 && col < c1 && row >= r0 && row < r1)) continue;  // another tile's voxel
+              // The owner: one of the quad's triangles (the likelier first), or, on the quad's left
+              // or top border, one of the neighbouring quads' (edge functions give a shared edge to
+              // one side only).
+              const GridTriangle* owner = nullptr;
+              double bary[3] = {0, 0, 0};
+              auto try_triangle = [&](std::int32_t t) {
+                if (t < 0 || !tris[t].ok) return false;
+                const GridTriangle& g = tris[t];
+                const Vector2d qv[3] = {frame.image_pos[g.idx[0]].cast<double>(), frame.image_pos[g.idx[1]].cast<double>(),
+                                        frame.image_pos[g.idx[2]].cast<double>()};
+                if (!g.own.owns(qv, q, bary)) return false;
+                owner = &g;
+                return true;
+              };
+              auto try_quad = [&](int qr, int qc, bool first_guess) {
+                if (qr < 0 || qc < 0) return false;
+                const Quad& qd = quad[std::size_t(qr) * QW + qc];
+                const int first = first_guess ? 0 : 1;
+                return try_triangle(qd.tri[first]) || try_triangle(qd.tri[1 - first]);
+              };
+              const Quad& here = quad[std::size_t(row) * QW + col];
+              const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
+              if (!try_quad(row, col, guess)) {
+                const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
+                if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
+                      (left && top && try_quad(row - 1, col - 1, true))))
+                  continue;
+              }
+              if (level < owner->coarsest || level > owner->level) continue;
+              const double ramp = ramp_of[owner->level];
+              const Vector3d dir = (X - centre).normalized();
+              VoxelSample v;
+              if (!voxel_sample(frame, owner->idx, owner->normal, frame.position[owner->idx[0]].cast<double>(), bary, X, dir,
+                                ramp, options, &v))
+                continue;
+              std::int64_t idx[3];
+              idx[ax] = ia;
+              idx[bx] = ib;
+              idx[cx] = ic;
+              const VoxelKey key = VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
+              const VoxelKey origin =
+                  VoxelKey::make(level, key.x() & block_mask, key.y() & block_mask, key.z() & block_mask);
+              accumulate(cache.voxel(key, origin), v.distance, v.weight, v.has_colour ? v.colour : nullptr);
+              ++local;
+            }
+          }
+      }
+      contributions.fetch_add(local, std::memory_order_relaxed);
+    });
+    chunk_begin = chunk_end;
+    if (map.spills()) map.enforce_limit();
+  }
   stats.contributions = contributions;
   *stats_out = stats;
   return true;

@@ -98,7 +98,8 @@ class BrickMap {
   // pointers handed out during a depth map stay valid: a depth map's bricks are pinned for its
   // duration. A brick touched again is reloaded from its tile under its own lock.
   void attach_store(const TileStore* store, std::size_t memory_limit);
-  // Starts a new access epoch (one per depth map).
+  bool spills() const { return store_ != nullptr; }
+  // Starts a new access epoch (one per depth map, or per chunk of one).
   void next_epoch() { ++epoch_; }
   // Spills least recently used bricks (ties by coordinate) until resident memory fits the limit.
   // Not safe concurrently with any other access.
