@@ -107,6 +107,21 @@ std::string root_text(const RootCube& r) {
   return o.str();
 }
 
+std::string hex16(std::uint64_t v) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
+  return buf;
+}
+
+// Records depth maps [from, frames.size()) in the inputs table (inside the caller's transaction).
+void insert_inputs(sqlite3* db, const std::vector<FrameIdentity>& frames, std::size_t from, const std::string& where) {
+  Statement ins(db, "INSERT INTO inputs(idx, name, size, hash) VALUES(?1, ?2, ?3, ?4)", where);
+  for (std::size_t i = from; i < frames.size(); ++i) {
+    ins.bind(1, std::int64_t(i)).bind(2, frames[i].name).bind(3, std::int64_t(frames[i].file_size));
+    ins.bind(4, hex16(frames[i].hash)).run();
+  }
+}
+
 // The first line where two texts differ, for a refusal message.
 std::string first_difference(const std::string& a, const std::string& b) {
   std::istringstream ia(a), ib(b);
@@ -209,13 +224,7 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
     set_meta(db_, "stage", "integrating", where);
     set_meta(db_, "integrated", "0", where);
     set_meta(db_, "max_generation", "0", where);
-    Statement ins(db_, "INSERT INTO inputs(idx, name, size, hash) VALUES(?1, ?2, ?3, ?4)", where);
-    for (std::size_t i = 0; i < frames.size(); ++i) {
-      char hash[17];
-      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(frames[i].hash));
-      ins.bind(1, std::int64_t(i)).bind(2, frames[i].name).bind(3, std::int64_t(frames[i].file_size)).bind(4, hash);
-      ins.run();
-    }
+    insert_inputs(db_, frames, 0, where);
     exec(db_, "COMMIT", where);
     store_->remove_all_except({});
     return 0;
@@ -238,9 +247,8 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
       if (i >= frames.size())
         throw InputError(where + ": the inputs changed: the job has more depth maps (" + s.text(1) +
                          " is gone); use a new --job directory");
-      char hash[17];
-      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(frames[i].hash));
-      if (s.text(1) != frames[i].name || std::uint64_t(s.integer(2)) != frames[i].file_size || s.text(3) != hash)
+      if (s.text(1) != frames[i].name || std::uint64_t(s.integer(2)) != frames[i].file_size ||
+          s.text(3) != hex16(frames[i].hash))
         throw InputError(where + ": the inputs changed: depth map " + std::to_string(i) + " (" + frames[i].name +
                          ") differs from the one the job integrated; use a new --job directory");
       ++count;
@@ -251,13 +259,7 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
                      std::to_string(frames.size()) + "; use a new --job directory");
   if (count < frames.size()) {  // scalefuse add: record the new depth maps
     exec(db_, "BEGIN IMMEDIATE", where);
-    Statement ins(db_, "INSERT INTO inputs(idx, name, size, hash) VALUES(?1, ?2, ?3, ?4)", where);
-    for (std::size_t i = count; i < frames.size(); ++i) {
-      char hash[17];
-      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(frames[i].hash));
-      ins.bind(1, std::int64_t(i)).bind(2, frames[i].name).bind(3, std::int64_t(frames[i].file_size)).bind(4, hash);
-      ins.run();
-    }
+    insert_inputs(db_, frames, count, where);
     set_meta(db_, "stage", "integrating", where);
     set_meta(db_, "input", input_, where);
     exec(db_, "COMMIT", where);
