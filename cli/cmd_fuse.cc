@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.h"
@@ -197,37 +198,54 @@ void run_fuse(const FuseArgs& a) {
       std::filesystem::remove_all(job_options.dir);
     }
   }
-  Job job(job_options, identity, input_abs, output_abs);
-  write_text_atomically(job.dir() / "config.toml", "# effective configuration of this job (scalefuse resume reads it)\n" + params.assignments());
-  if (!a.quiet)
-    std::fprintf(stderr, "job: %s (bricks in memory up to %.2f GiB, checkpoint every %zu depth maps or %.0f s)\n",
-                 std::filesystem::absolute(job.dir()).c_str(), double(job_options.memory_limit) / double(1u << 30),
-                 job_options.checkpoint_every, job_options.checkpoint_seconds);
-  if (!a.quiet)
-    std::fprintf(stderr, "input: %s (%s, %zu depth maps), %d threads\n", a.input.c_str(), source->format().c_str(),
-                 source->size(), threads);
-  ProgressPrinter printer(a.quiet);
-  FusionHooks hooks;
-  hooks.progress = [&](std::string_view stage, double done, double total) { printer(stage, done, total); };
-  if (!a.export_vdb.empty())
-    hooks.on_regularized = [&](const BrickMap& map, const RootCube& root) { export_vdb(a.export_vdb, map, root); };
-  // SIGINT/SIGTERM stop the integration after the depth maps in flight, checkpoint, and exit.
-  auto stop_signals = std::make_unique<StopSignals>();
-  hooks.stop = &g_stop;
-  // Past integration a signal ends the process as usual: the job is checkpointed.
-  hooks.integrated = [&] { stop_signals.reset(); };
+  auto run_job = [&](Job& job, Mesh& mesh, FusionStats& stats) {
+    write_text_atomically(job.dir() / "config.toml",
+                          "# effective configuration of this job (scalefuse resume reads it)\n" + params.assignments());
+    if (!a.quiet)
+      std::fprintf(stderr, "job: %s (bricks in memory up to %.2f GiB, checkpoint every %zu depth maps or %.0f s)\n",
+                   std::filesystem::absolute(job.dir()).c_str(), double(job_options.memory_limit) / double(1u << 30),
+                   job_options.checkpoint_every, job_options.checkpoint_seconds);
+    if (!a.quiet)
+      std::fprintf(stderr, "input: %s (%s, %zu depth maps), %d threads\n", a.input.c_str(), source->format().c_str(),
+                   source->size(), threads);
+    ProgressPrinter printer(a.quiet);
+    FusionHooks hooks;
+    hooks.progress = [&](std::string_view stage, double done, double total) { printer(stage, done, total); };
+    if (!a.export_vdb.empty())
+      hooks.on_regularized = [&](const BrickMap& map, const RootCube& root) { export_vdb(a.export_vdb, map, root); };
+    // SIGINT/SIGTERM stop the integration after the depth maps in flight, checkpoint, and exit.
+    auto stop_signals = std::make_unique<StopSignals>();
+    hooks.stop = &g_stop;
+    // Past integration a signal ends the process as usual: the job is checkpointed.
+    hooks.integrated = [&] { stop_signals.reset(); };
+    tbb::task_arena arena(threads);
+    try {
+      arena.execute([&] { mesh = fuse(*source, options, hooks, &stats, &job); });
+    } catch (const Interrupted& e) {
+      printer.finish();
+      throw JobInterrupted(std::string(e.what()) + "; checkpoint written; continue with: scalefuse resume " +
+                               std::filesystem::absolute(job.dir()).string(),
+                           g_signal.load());
+    }
+    printer.finish();
+  };
+  // An implicit job whose depth maps changed is started over (once); an explicit one is refused.
+  std::optional<Job> job_holder;
   FusionStats stats;
   Mesh mesh;
-  tbb::task_arena arena(threads);
-  try {
-    arena.execute([&] { mesh = fuse(*source, options, hooks, &stats, &job); });
-  } catch (const Interrupted& e) {
-    printer.finish();
-    throw JobInterrupted(std::string(e.what()) + "; checkpoint written; continue with: scalefuse resume " +
-                             std::filesystem::absolute(job.dir()).string(),
-                         g_signal.load());
+  for (int attempt = 0;; ++attempt) {
+    job_holder.emplace(job_options, identity, input_abs, output_abs);
+    try {
+      run_job(*job_holder, mesh, stats);
+      break;
+    } catch (const JobMismatch& e) {
+      if (!implicit_job || attempt > 0) throw;
+      if (!a.quiet) std::fprintf(stderr, "starting over: %s\n", e.what());
+      job_holder.reset();
+      std::filesystem::remove_all(job_options.dir);
+    }
   }
-  printer.finish();
+  Job& job = *job_holder;
   if (mesh.faces.empty()) throw InputError("the fused field has no surface (no zero crossing survived); nothing written");
   write_ply_mesh(a.output, mesh);
   link_into_job(a.output, job.dir() / "mesh.ply");

@@ -234,10 +234,10 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
   // Same configuration and inputs, or refuse.
   const std::string old_config = meta(db_, "config", where);
   if (old_config != config_)
-    throw InputError(where + ": the configuration differs from the job's (" + first_difference(old_config, config_) +
+    throw JobMismatch(where + ": the configuration differs from the job's (" + first_difference(old_config, config_) +
                      "); use a new --job directory");
   if (!options_.allow_new_inputs && meta(db_, "input", where) != input_)
-    throw InputError(where + ": the job was started on " + meta(db_, "input", where) + ", not " + input_ +
+    throw JobMismatch(where + ": the job was started on " + meta(db_, "input", where) + ", not " + input_ +
                      "; use a new --job directory");
   std::size_t count = 0;
   {
@@ -245,17 +245,17 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
     while (s.step()) {
       const std::size_t i = std::size_t(s.integer(0));
       if (i >= frames.size())
-        throw InputError(where + ": the inputs changed: the job has more depth maps (" + s.text(1) +
+        throw JobMismatch(where + ": the inputs changed: the job has more depth maps (" + s.text(1) +
                          " is gone); use a new --job directory");
       if (s.text(1) != frames[i].name || std::uint64_t(s.integer(2)) != frames[i].file_size ||
           s.text(3) != hex16(frames[i].hash))
-        throw InputError(where + ": the inputs changed: depth map " + std::to_string(i) + " (" + frames[i].name +
+        throw JobMismatch(where + ": the inputs changed: depth map " + std::to_string(i) + " (" + frames[i].name +
                          ") differs from the one the job integrated; use a new --job directory");
       ++count;
     }
   }
   if (count != frames.size() && !(options_.allow_new_inputs && count < frames.size()))
-    throw InputError(where + ": the inputs changed: the job has " + std::to_string(count) + " depth maps, the input " +
+    throw JobMismatch(where + ": the inputs changed: the job has " + std::to_string(count) + " depth maps, the input " +
                      std::to_string(frames.size()) + "; use a new --job directory");
   if (count < frames.size()) {  // scalefuse add: record the new depth maps
     exec(db_, "BEGIN IMMEDIATE", where);
@@ -265,7 +265,7 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
     exec(db_, "COMMIT", where);
   }
   if (meta(db_, "root", where) != root_text(root) || meta(db_, "brick_level", where) != std::to_string(map.brick_level()))
-    throw InputError(where + ": the root cube or brick level differs from the job's");
+    throw JobMismatch(where + ": the root cube or brick level differs from the job's");
   // Restore the last checkpoint.
   std::vector<ManifestEntry> manifest;
   std::set<std::pair<std::uint64_t, std::uint64_t>> keep;

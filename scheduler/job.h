@@ -19,12 +19,19 @@
 #include <string>
 #include <vector>
 
+#include "engine/error.h"
 #include "engine/fusion.h"
 #include "storage/tile_store.h"
 
 struct sqlite3;
 
 namespace sf {
+
+// The job directory holds a job of other inputs or parameters (resuming it is refused).
+class JobMismatch : public InputError {
+ public:
+  using InputError::InputError;
+};
 
 struct JobOptions {
   std::filesystem::path dir;

@@ -139,6 +139,11 @@ TEST(Job, RefusesChangedParametersOrInputsAndReextractsAFinishedJob) {
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(nlohmann::json::parse(bytes_of(dir / "s.json"))["resumed_at"], 10);
 
+  // An implicit job (OUTPUT.job) on the same input, to be started over below.
+  const std::string implicit = "fuse " + input.string() + " -o " + (dir / "implicit.ply").string() + " -q " + kScene;
+  ASSERT_EQ(scalefuse(implicit).code, 0);
+  const std::string before = bytes_of(dir / "implicit.ply");
+
   // A moved scan changes a depth map: refused.
   {
     std::ifstream in(input / "bun.conf");
@@ -153,6 +158,12 @@ TEST(Job, RefusesChangedParametersOrInputsAndReextractsAFinishedJob) {
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("inputs changed"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("bun045"), std::string::npos) << r.output;
+  // The implicit job is not the user's: it starts over with the moved scan.
+  r = scalefuse(implicit);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_FALSE(bytes_of(dir / "implicit.ply") == before);
+  const auto st = json_of(scalefuse("status " + (dir / "implicit.ply.job").string() + " --json").output);
+  EXPECT_EQ(st["integrated"], 10);
 }
 
 // `scalefuse add`: six scans, then the other four into the same job, give the mesh of all ten
