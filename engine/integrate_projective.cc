@@ -306,7 +306,6 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         index_range(ax, lo[ax], hi[ax], &a0, &a1);
         index_range(bx, lo[bx], hi[bx], &b0, &b1);
         index_range(cx, lo[cx], hi[cx], &cc0, &cc1);
-        const std::uint32_t block_mask = ~((1u << block_log(level, brick_level)) - 1);
         for (std::int64_t ib = b0; ib <= b1; ++ib)
           for (std::int64_t ic = cc0; ic <= cc1; ++ic) {
             Vector3d base;
@@ -381,8 +380,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               idx[bx] = ib;
               idx[cx] = ic;
               const VoxelKey key = VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
-              const VoxelKey origin =
-                  VoxelKey::make(level, key.x() & block_mask, key.y() & block_mask, key.z() & block_mask);
+              const VoxelKey origin = block_origin(key, brick_level);
               accumulate(cache.voxel(key, origin), v.distance, v.weight, v.has_colour ? v.colour : nullptr);
               ++local;
             }

@@ -69,6 +69,25 @@ void exec(sqlite3* db, const std::string& sql, const std::string& where) {
   }
 }
 
+// A write transaction that rolls back unless committed, so a failure midway leaves the journal
+// as it was.
+class Transaction {
+ public:
+  Transaction(sqlite3* db, const std::string& where) : db_(db), where_(where) { exec(db, "BEGIN IMMEDIATE", where); }
+  ~Transaction() {
+    if (!committed_) sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+  }
+  void commit() {
+    exec(db_, "COMMIT", where_);
+    committed_ = true;
+  }
+
+ private:
+  sqlite3* db_;
+  std::string where_;
+  bool committed_ = false;
+};
+
 sqlite3* open_db(const std::filesystem::path& file, bool create) {
   sqlite3* db = nullptr;
   const int flags = SQLITE_OPEN_READWRITE | (create ? SQLITE_OPEN_CREATE : 0) | SQLITE_OPEN_FULLMUTEX;
@@ -214,7 +233,7 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
   map.attach_store(store_.get(), options_.memory_limit);
   const std::string version = meta(db_, "version", where);
   if (version.empty()) {  // a new job
-    exec(db_, "BEGIN IMMEDIATE", where);
+    Transaction t(db_, where);
     set_meta(db_, "version", std::to_string(kJobVersion), where);
     set_meta(db_, "config", config_, where);
     set_meta(db_, "input", input_, where);
@@ -225,7 +244,7 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
     set_meta(db_, "integrated", "0", where);
     set_meta(db_, "max_generation", "0", where);
     insert_inputs(db_, frames, 0, where);
-    exec(db_, "COMMIT", where);
+    t.commit();
     store_->remove_all_except({});
     return 0;
   }
@@ -258,11 +277,11 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
     throw JobMismatch(where + ": the inputs changed: the job has " + std::to_string(count) + " depth maps, the input " +
                      std::to_string(frames.size()) + "; use a new --job directory");
   if (count < frames.size()) {  // scalefuse add: record the new depth maps
-    exec(db_, "BEGIN IMMEDIATE", where);
+    Transaction t(db_, where);
     insert_inputs(db_, frames, count, where);
     set_meta(db_, "stage", "integrating", where);
     set_meta(db_, "input", input_, where);
-    exec(db_, "COMMIT", where);
+    t.commit();
   }
   if (meta(db_, "root", where) != root_text(root) || meta(db_, "brick_level", where) != std::to_string(map.brick_level()))
     throw JobMismatch(where + ": the root cube or brick level differs from the job's");
@@ -292,23 +311,18 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
 void Job::checkpoint(BrickMap& map, const char* stage) {
   const std::string where = options_.dir.string();
   const std::vector<ManifestEntry> manifest = map.write_checkpoint();  // tiles are fsynced
-  exec(db_, "BEGIN IMMEDIATE", where);
-  try {
-    exec(db_, "DELETE FROM manifest", where);
-    Statement ins(db_, "INSERT INTO manifest(bx, by, bz, generation, bytes) VALUES(?1, ?2, ?3, ?4, ?5)", where);
-    for (const ManifestEntry& e : manifest) {
-      ins.bind(1, e.coord.x).bind(2, e.coord.y).bind(3, e.coord.z).bind(4, std::int64_t(e.generation));
-      ins.bind(5, std::int64_t(e.bytes)).run();
-    }
-    set_meta(db_, "integrated", std::to_string(done_), where);
-    set_meta(db_, "max_generation", std::to_string(map.max_generation()), where);
-    set_meta(db_, "stage", stage, where);
-    set_meta(db_, "checkpoint_time", utc_now(), where);
-    exec(db_, "COMMIT", where);
-  } catch (...) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    throw;
+  Transaction t(db_, where);
+  exec(db_, "DELETE FROM manifest", where);
+  Statement ins(db_, "INSERT INTO manifest(bx, by, bz, generation, bytes) VALUES(?1, ?2, ?3, ?4, ?5)", where);
+  for (const ManifestEntry& e : manifest) {
+    ins.bind(1, e.coord.x).bind(2, e.coord.y).bind(3, e.coord.z).bind(4, std::int64_t(e.generation));
+    ins.bind(5, std::int64_t(e.bytes)).run();
   }
+  set_meta(db_, "integrated", std::to_string(done_), where);
+  set_meta(db_, "max_generation", std::to_string(map.max_generation()), where);
+  set_meta(db_, "stage", stage, where);
+  set_meta(db_, "checkpoint_time", utc_now(), where);
+  t.commit();
   map.checkpoint_committed();
   since_checkpoint_ = 0;
   ++checkpoints_;

@@ -99,6 +99,9 @@ void BrickMap::write_tile_of(Brick& b) {
   b.dirty = false;
 }
 
+// Memory a resident brick holds: its blocks and index, and the brick itself.
+static std::size_t resident_size(const Brick& b) { return b.voxels.memory_bytes() + sizeof(Brick); }
+
 void BrickMap::attach_store(const TileStore* store, std::size_t memory_limit) {
   store_ = store;
   memory_limit_ = memory_limit;
@@ -107,7 +110,7 @@ void BrickMap::attach_store(const TileStore* store, std::size_t memory_limit) {
 std::size_t BrickMap::resident_bytes() const {
   std::size_t n = 0;
   for (Brick* b : bricks())
-    if (b->resident) n += b->voxels.memory_bytes() + sizeof(Brick);
+    if (b->resident) n += resident_size(*b);
   return n;
 }
 
@@ -118,13 +121,13 @@ void BrickMap::enforce_limit() {
   for (Brick* b : bricks())
     if (b->resident) {
       resident.push_back(b);
-      bytes += b->voxels.memory_bytes() + sizeof(Brick);
+      bytes += resident_size(*b);
     }
   if (bytes <= memory_limit_) return;
   std::stable_sort(resident.begin(), resident.end(), [](Brick* a, Brick* b) { return a->last_use < b->last_use; });
   for (Brick* b : resident) {
     if (bytes <= memory_limit_) break;
-    bytes -= b->voxels.memory_bytes() + sizeof(Brick);
+    bytes -= resident_size(*b);
     if (b->dirty || b->generation == 0) write_tile_of(*b);
     b->voxels.clear();
     b->resident = false;

@@ -54,6 +54,12 @@ constexpr int block_log(int level, int brick_level) {
   return k < 0 ? 0 : (k > kMaxBlockLog ? kMaxBlockLog : k);
 }
 
+// The origin of the block holding `key` (the one rule; VoxelTable and integration both use it).
+inline VoxelKey block_origin(VoxelKey key, int brick_level) {
+  const std::uint32_t m = ~((1u << block_log(key.level(), brick_level)) - 1);
+  return VoxelKey::make(key.level(), key.x() & m, key.y() & m, key.z() & m);
+}
+
 // A block's voxels, addressed relative to its origin.
 struct BlockRef {
   VoxelKey origin;
@@ -75,11 +81,7 @@ class VoxelTable {
   std::size_t memory_bytes() const { return bytes_; }  // blocks and index, kept up to date
 
   // The origin of the block holding `key`.
-  VoxelKey block_origin(VoxelKey key) const {
-    const int log = block_log(key.level(), brick_level_);
-    const std::uint32_t m = ~((1u << log) - 1);
-    return VoxelKey::make(key.level(), key.x() & m, key.y() & m, key.z() & m);
-  }
+  VoxelKey block_origin(VoxelKey key) const { return sf::block_origin(key, brick_level_); }
 
   // The block holding `key`; null data if absent and !create.
   BlockRef block(VoxelKey key, bool create);
