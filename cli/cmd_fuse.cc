@@ -19,6 +19,7 @@
 #include "cli/progress_printer.h"
 #include "engine/error.h"
 #include "engine/fusion.h"
+#include "engine/input/follow_source.h"
 #include "engine/meshio/ply_io.h"
 #include "engine/vdb_export.h"
 #include "scheduler/job.h"
@@ -31,6 +32,11 @@ namespace {
 std::atomic<bool> g_stop{false};
 std::atomic<int> g_signal{0};
 extern "C" void on_stop_signal(int sig) {
+  if (g_stop.load()) {  // a second signal: the user insists; the last checkpoint stays resumable
+    ::signal(sig, SIG_DFL);
+    ::raise(sig);
+    return;
+  }
   g_signal.store(sig);
   g_stop.store(true);
 }
@@ -63,6 +69,7 @@ nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
   j["depth_maps"] = s.depth_maps;
   j["resumed_at"] = s.resumed_at;
   j["samples"] = s.samples;
+  j["samples_outside_root"] = s.samples_outside_root;
   j["triangles_in"] = s.triangles;
   j["contributions"] = s.contributions;
   j["root"] = {{"min", {s.root.min.x(), s.root.min.y(), s.root.min.z()}}, {"size", s.root.size}};
@@ -94,6 +101,9 @@ void print_summary(const FusionStats& s, const Mesh& mesh, const std::string& ou
                s.samples, s.triangles);
   std::fprintf(stderr, "  root cube        %.4g m at (%.4g, %.4g, %.4g)\n", s.root.size, s.root.min.x(), s.root.min.y(),
                s.root.min.z());
+  if (s.samples_outside_root)
+    std::fprintf(stderr, "  outside root     %zu samples of depth maps that arrived while following (dropped; give --bbox)\n",
+                 s.samples_outside_root);
   std::fprintf(stderr, "  level  cell size    triangles   voxels fused  voxels kept\n");
   for (int l = 0; l <= kMaxLevel; ++l)
     if (s.voxels_fused[l] || s.triangles_per_level[l])
@@ -168,19 +178,45 @@ void run_fuse(const FuseArgs& a) {
   if (a.print_params) return;
 
   const int threads = a.threads > 0 ? a.threads : tbb::info::default_concurrency();
-  std::vector<std::unique_ptr<FrameSource>> parts;
-  parts.push_back(open_input(a.input, options.input));
-  std::string input_abs = std::filesystem::absolute(a.input).string();
-  for (const std::string& more : a.more_inputs) {
-    parts.push_back(open_input(more, options.input));
-    input_abs += "\n" + std::filesystem::absolute(more).string();
-  }
-  auto source = concatenate_inputs(std::move(parts));
-
   // The job directory: given, or next to the output.
   const bool implicit_job = a.job.empty();
   JobOptions job_options;
   job_options.dir = implicit_job ? std::filesystem::path(a.output + ".job") : std::filesystem::path(a.job);
+  // A job started with --follow keeps its order of depth maps when resumed, followed or not.
+  const bool followed_job =
+      !implicit_job && std::filesystem::exists(job_options.dir / "job.sqlite") && Job::status(job_options.dir).follow;
+  job_options.follow = a.follow || followed_job;
+
+  std::string input_abs = std::filesystem::absolute(a.input).string();
+  std::unique_ptr<FrameSource> source;
+  FollowSource* follow = nullptr;
+  const std::filesystem::path stop_file =
+      a.stop_file.empty() ? job_options.dir / "STOP" : std::filesystem::path(a.stop_file);
+  if (job_options.follow) {
+    if (!a.more_inputs.empty()) throw InputError("--follow takes one input folder");
+    FollowOptions fo;
+    fo.settle_seconds = a.settle_seconds;
+    fo.poll_seconds = a.poll_seconds;
+    fo.stop_file = stop_file;
+    fo.stop = &g_stop;
+    fo.until_idle = !a.follow;
+    if (!a.quiet) fo.notice = [](const std::string& line) { std::fprintf(stderr, "follow: %s\n", line.c_str()); };
+    auto fs = std::make_unique<FollowSource>(a.input, options.input, fo, Job::recorded_inputs(job_options.dir));
+    follow = fs.get();
+    follow->rescan();
+    source = std::move(fs);
+    if (a.follow && !a.quiet)
+      std::fprintf(stderr, "following %s: integrating depth maps as they complete; stop with: touch %s (or SIGTERM)\n",
+                   input_abs.c_str(), std::filesystem::absolute(stop_file).c_str());
+  } else {
+    std::vector<std::unique_ptr<FrameSource>> parts;
+    parts.push_back(open_input(a.input, options.input));
+    for (const std::string& more : a.more_inputs) {
+      parts.push_back(open_input(more, options.input));
+      input_abs += "\n" + std::filesystem::absolute(more).string();
+    }
+    source = concatenate_inputs(std::move(parts));
+  }
   job_options.memory_limit = a.memory_limit.empty() ? default_memory_limit() : parse_byte_size(a.memory_limit, "--memory-limit");
   job_options.checkpoint_every = a.checkpoint_every;
   job_options.checkpoint_seconds = a.checkpoint_seconds;
@@ -206,8 +242,8 @@ void run_fuse(const FuseArgs& a) {
                    std::filesystem::absolute(job.dir()).c_str(), double(job_options.memory_limit) / double(1u << 30),
                    job_options.checkpoint_every, job_options.checkpoint_seconds);
     if (!a.quiet)
-      std::fprintf(stderr, "input: %s (%s, %zu depth maps), %d threads\n", a.input.c_str(), source->format().c_str(),
-                   source->size(), threads);
+      std::fprintf(stderr, "input: %s (%s, %zu depth maps%s), %d threads\n", a.input.c_str(), source->format().c_str(),
+                   source->size(), follow ? " complete so far" : "", threads);
     ProgressPrinter printer(a.quiet);
     FusionHooks hooks;
     hooks.progress = [&](std::string_view stage, double done, double total) { printer(stage, done, total); };
@@ -216,6 +252,7 @@ void run_fuse(const FuseArgs& a) {
     // SIGINT/SIGTERM stop the integration after the depth maps in flight, checkpoint, and exit.
     auto stop_signals = std::make_unique<StopSignals>();
     hooks.stop = &g_stop;
+    hooks.follow = follow;
     // Past integration a signal ends the process as usual: the job is checkpointed.
     hooks.integrated = [&] { stop_signals.reset(); };
     tbb::task_arena arena(threads);
@@ -250,6 +287,10 @@ void run_fuse(const FuseArgs& a) {
   write_ply_mesh(a.output, mesh);
   link_into_job(a.output, job.dir() / "mesh.ply");
   job.finished(std::filesystem::absolute(a.output));
+  if (follow) {  // consumed: a later --follow of this job must not stop at once
+    std::error_code ec;
+    std::filesystem::remove(stop_file, ec);
+  }
   if (!a.quiet && stats.resumed_at > 0)
     std::fprintf(stderr, "resumed: %zu of %zu depth maps were already integrated\n", stats.resumed_at, stats.depth_maps);
   if (!a.stats_json.empty()) {
@@ -287,6 +328,14 @@ void add_fuse_command(CLI::App& app) {
   cmd->add_option("--confidence", args->mve_confidence, "MVE confidence embedding (e.g. conf-L2)");
   cmd->add_option("--bbox", args->bbox, "clip box xmin,ymin,zmin,xmax,ymax,zmax (metres)");
   cmd->add_option("--job", args->job, "job directory (default: OUTPUT.job); an unfinished job there resumes");
+  cmd->add_flag("--follow", args->follow,
+                "keep integrating depth maps as they appear in INPUT until the stop file exists or SIGTERM");
+  cmd->add_option("--stop-file", args->stop_file, "with --follow: stop when this file exists (default: JOB/STOP)");
+  cmd->add_option("--settle-seconds", args->settle_seconds,
+                  "with --follow: a depth map is complete once unchanged this long and readable (default 2)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--poll-seconds", args->poll_seconds, "with --follow: look at the folder this often (default 1)")
+      ->check(CLI::PositiveNumber);
   add_job_options(cmd, *args);
   cmd->add_flag("--print-params", args->print_params, "print the effective parameters and exit");
   cmd->callback([args] { run_fuse(*args); });

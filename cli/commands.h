@@ -17,6 +17,9 @@ struct FuseArgs {
   std::vector<std::string> sets;
   std::vector<std::string> more_inputs;  // further input folders after `input` (a grown job)
   bool add = false;                      // scalefuse add: the inputs may extend the job's
+  bool follow = false;                   // fuse --follow: the input folder is still being written
+  std::string stop_file;                 // --follow ends when it exists (default: JOB/STOP)
+  double settle_seconds = 2.0, poll_seconds = 1.0;
   int threads = 0;
   std::size_t checkpoint_every = 50;
   double checkpoint_seconds = 300;

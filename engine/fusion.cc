@@ -96,17 +96,30 @@ void clip_to_box(DepthFrame& f, const std::optional<Eigen::AlignedBox3d>& box) {
     if (f.valid[i] && !box->contains(f.position[i].cast<double>())) f.valid[i] = 0;
 }
 
+// Reads a depth map's identity for the job journal.
+FrameIdentity identity_of(const FrameSource& source, std::size_t index, const DepthFrame& f) {
+  FrameIdentity id;
+  id.name = std::filesystem::absolute(source.frame_name(index)).string();
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(id.name, ec);
+  id.file_size = ec ? 0 : std::uint64_t(size);
+  id.hash = f.content_hash();
+  return id;
+}
+
+std::size_t count_valid(const DepthFrame& f) {
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < f.size(); ++k) n += f.valid[k] ? 1 : 0;
+  return n;
+}
+
 }  // namespace
 
 Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats_out,
           FusionJournal* journal) {
   options.check();
   FusionStats stats;
-  stats.format = source.format();
-  // The depth maps to fuse, in input order.
-  std::vector<std::size_t> frames;
-  for (std::size_t i = 0; i < source.size(); i += std::size_t(options.input.frame_step)) frames.push_back(i);
-  stats.depth_maps = frames.size();
+  const std::size_t step = std::size_t(options.input.frame_step);
   const auto clip = parse_bbox(options.octree.bbox);
   auto stage_start = Clock::now();
   auto end_stage = [&](const char* name) {
@@ -114,6 +127,19 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     stats.times.push_back({name, std::chrono::duration<double>(now - stage_start).count()});
     stage_start = now;
   };
+  // Following a folder that holds nothing yet: wait for its first depth map.
+  if (hooks.follow && source.size() == 0 && !hooks.follow->wait_for_more(0))
+    throw InputError("the followed input received no complete depth map before the feed ended");
+  stats.format = source.format();
+  // The depth maps to fuse, in input order (grows while following).
+  std::vector<std::size_t> frames;
+  std::size_t source_seen = 0;  // source indices [0, source_seen) are in `frames` or skipped by frame_step
+  auto take_new_frames = [&] {
+    const std::size_t n = source.size();
+    for (; source_seen < n; ++source_seen)
+      if (source_seen % step == 0) frames.push_back(source_seen);
+  };
+  take_new_frames();
 
   // Pass 1: bounds of the data, so the root cube is no larger than the data needs, and each depth
   // map's identity for the job.
@@ -123,14 +149,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   std::size_t samples = 0, bounded = 0;
   tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t i) {
     DepthFrame f = source.load(frames[i]);
-    if (journal) {
-      FrameIdentity& id = identities[i];
-      id.name = std::filesystem::absolute(source.frame_name(frames[i])).string();
-      std::error_code ec;
-      const auto size = std::filesystem::file_size(id.name, ec);
-      id.file_size = ec ? 0 : std::uint64_t(size);
-      id.hash = f.content_hash();
-    }
+    if (journal) identities[i] = identity_of(source, frames[i], f);
     clip_to_box(f, clip);
     Eigen::AlignedBox3d b;
     std::size_t n = 0;
@@ -144,15 +163,21 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     samples += n;
     report(hooks.progress, "bounds", double(++bounded), double(frames.size()));
   });
-  if (samples == 0) throw InputError("the input holds no valid depth samples" + std::string(clip ? " inside octree.bbox" : ""));
+  if (samples == 0 && !hooks.follow)
+    throw InputError("the input holds no valid depth samples" + std::string(clip ? " inside octree.bbox" : ""));
+  if (samples == 0 && !clip)
+    throw InputError("the followed input's first depth maps hold no valid samples: give octree.bbox (--bbox)");
   stats.samples = samples;
   const std::optional<RootCube> job_root = journal ? journal->fixed_root() : std::nullopt;
   const RootCube root =
       job_root ? *job_root : (clip ? root_cube_for(*clip, 0.0) : root_cube_for(bounds, options.octree.padding));
   stats.root = root;
+  // While following, later depth maps may reach past the root cube fixed now: clip them to it.
+  const Eigen::AlignedBox3d root_box(root.min, root.min + Eigen::Vector3d::Constant(root.size));
   end_stage("bounds");
 
-  // Pass 2: stream the depth maps through read -> triangulate (parallel) -> integrate (in order).
+  // Pass 2: stream the depth maps through read -> triangulate (parallel) -> integrate (in order),
+  // in rounds: one over the depth maps present, then (following) one per growth of the source.
   BrickMap map(options.octree.brick_level);
   const std::size_t first = journal ? journal->begin(identities, root, map) : 0;
   if (first > frames.size()) throw std::logic_error("journal reports more depth maps than the input has");
@@ -163,41 +188,66 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     std::vector<FrameTriangle> triangles;
   };
   std::size_t next = first, done = first;
+  std::atomic<std::size_t> outside{0}, late_samples{0};
   IntegrateStats integ;
   const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
-  tbb::parallel_pipeline(
-      tokens,
-      tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
-                                                    [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
-                                                      if (next >= frames.size() || (hooks.stop && hooks.stop->load())) {
-                                                        fc.stop();
-                                                        return nullptr;
-                                                      }
-                                                      auto item = std::make_shared<Item>();
-                                                      item->index = next++;
-                                                      return item;
-                                                    }) &
-          tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
-              tbb::filter_mode::parallel,
-              [&](std::shared_ptr<Item> item) {
-                item->frame = source.load(frames[item->index]);
-                clip_to_box(item->frame, clip);
-                item->triangles = triangulate(item->frame, options.triangulate);
-                return item;
-              }) &
-          tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
-            // Depth maps enter the field strictly in index order (equations 2-3 are order-sensitive
-            // in floating point).
-            map.next_epoch();
-            integ.add(integrate_frame(item->frame, item->triangles, root, options.integrate, map));
-            ++done;
-            if (journal) journal->frame_done(done, map);
-            report(hooks.progress, "integrate", double(done), double(frames.size()));
-          }));
-  if (done < frames.size()) {  // stopped
-    if (journal) journal->interrupted(done, map);
-    throw Interrupted(done, frames.size());
+  const std::atomic<bool>* stop = hooks.follow ? nullptr : hooks.stop;
+  const std::size_t initial_frames = frames.size();
+  for (;;) {
+    tbb::parallel_pipeline(
+        tokens,
+        tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
+                                                      [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
+                                                        if (next >= frames.size() || (stop && stop->load())) {
+                                                          fc.stop();
+                                                          return nullptr;
+                                                        }
+                                                        auto item = std::make_shared<Item>();
+                                                        item->index = next++;
+                                                        return item;
+                                                      }) &
+            tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
+                tbb::filter_mode::parallel,
+                [&](std::shared_ptr<Item> item) {
+                  item->frame = source.load(frames[item->index]);
+                  clip_to_box(item->frame, clip);
+                  if (item->index >= initial_frames) {  // arrived while following
+                    const std::size_t before = count_valid(item->frame);
+                    clip_to_box(item->frame, root_box);
+                    const std::size_t after = count_valid(item->frame);
+                    outside += before - after;
+                    late_samples += after;
+                  }
+                  item->triangles = triangulate(item->frame, options.triangulate);
+                  return item;
+                }) &
+            tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
+              // Depth maps enter the field strictly in index order (equations 2-3 are order-sensitive
+              // in floating point).
+              map.next_epoch();
+              integ.add(integrate_frame(item->frame, item->triangles, root, options.integrate, map));
+              ++done;
+              if (journal) journal->frame_done(done, map);
+              report(hooks.progress, "integrate", double(done), double(frames.size()));
+            }));
+    if (done < frames.size()) {  // stopped
+      if (journal) journal->interrupted(done, map);
+      throw Interrupted(done, frames.size());
+    }
+    if (!hooks.follow || !hooks.follow->wait_for_more(source.size())) break;
+    const std::size_t from = frames.size();
+    take_new_frames();
+    if (journal) {
+      identities.resize(frames.size());
+      tbb::parallel_for(from, frames.size(), [&](std::size_t i) {
+        identities[i] = identity_of(source, frames[i], source.load(frames[i]));
+      });
+      journal->inputs_added(identities, from);
+    }
   }
+  stats.depth_maps = frames.size();
+  stats.samples += late_samples.load();
+  stats.samples_outside_root = outside.load();
   if (journal) journal->integrated(map);
   if (hooks.integrated) hooks.integrated();
   stats.peak_rss_integrate_bytes = peak_rss_bytes();

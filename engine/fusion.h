@@ -49,6 +49,7 @@ struct StageTime {
 struct FusionStats {
   std::string format;
   std::size_t depth_maps = 0, samples = 0, triangles = 0, contributions = 0;
+  std::size_t samples_outside_root = 0;  // fuse --follow: samples of later depth maps outside the root cube
   std::size_t resumed_at = 0;  // depth maps already integrated by an earlier run of the job
   RootCube root;
   std::array<std::size_t, kMaxLevel + 1> voxels_fused{};        // after integration
@@ -71,6 +72,11 @@ struct FusionHooks {
   // Called once the integration is complete (and checkpointed): `stop` is not read after this.
   std::function<void()> integrated;
   std::function<void(const BrickMap&, const RootCube&)> on_regularized;
+  // fuse --follow: the source grows; fuse() integrates what it holds, then asks the feed for more
+  // until the feed ends. The root cube comes from octree.bbox or the depth maps present at the
+  // start; later samples outside it are dropped (counted in FusionStats::samples_outside_root).
+  // `stop` is not read while following: the feed watches for signals and ends.
+  FrameFeed* follow = nullptr;
 };
 
 // fuse() was stopped through FusionHooks::stop; the journal holds a checkpoint of `done` maps.
@@ -102,6 +108,8 @@ class FusionJournal {
   // it from the last checkpoint; 0 for a new job. Throws InputError if the job was started on
   // other inputs or another configuration.
   virtual std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) = 0;
+  // The source grew (fuse --follow): depth maps [from, frames.size()) are new; record them.
+  virtual void inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) = 0;
   // `done` depth maps are integrated; may spill bricks and commit a checkpoint.
   virtual void frame_done(std::size_t done, BrickMap& map) = 0;
   // Integration is complete: the final checkpoint.

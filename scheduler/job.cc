@@ -243,6 +243,7 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
     set_meta(db_, "stage", "integrating", where);
     set_meta(db_, "integrated", "0", where);
     set_meta(db_, "max_generation", "0", where);
+    set_meta(db_, "follow", options_.follow ? "1" : "0", where);
     insert_inputs(db_, frames, 0, where);
     t.commit();
     store_->remove_all_except({});
@@ -255,7 +256,8 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
   if (old_config != config_)
     throw JobMismatch(where + ": the configuration differs from the job's (" + first_difference(old_config, config_) +
                      "); use a new --job directory");
-  if (!options_.allow_new_inputs && meta(db_, "input", where) != input_)
+  const bool may_grow = options_.allow_new_inputs || options_.follow;
+  if (!may_grow && meta(db_, "input", where) != input_)
     throw JobMismatch(where + ": the job was started on " + meta(db_, "input", where) + ", not " + input_ +
                      "; use a new --job directory");
   std::size_t count = 0;
@@ -273,10 +275,10 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
       ++count;
     }
   }
-  if (count != frames.size() && !(options_.allow_new_inputs && count < frames.size()))
+  if (count != frames.size() && !(may_grow && count < frames.size()))
     throw JobMismatch(where + ": the inputs changed: the job has " + std::to_string(count) + " depth maps, the input " +
                      std::to_string(frames.size()) + "; use a new --job directory");
-  if (count < frames.size()) {  // scalefuse add: record the new depth maps
+  if (count < frames.size()) {  // scalefuse add, or more depth maps arrived while following: record them
     Transaction t(db_, where);
     insert_inputs(db_, frames, count, where);
     set_meta(db_, "stage", "integrating", where);
@@ -367,6 +369,7 @@ JobStatus Job::recorded(const std::filesystem::path& dir, std::string* config) {
     const std::string integrated = meta(db, "integrated", where);
     st.integrated = integrated.empty() ? 0 : std::stoull(integrated);
     st.last_checkpoint = meta(db, "checkpoint_time", where);
+    st.follow = meta(db, "follow", where) == "1";
     if (config) *config = meta(db, "config", where);
     {
       Statement s(db, "SELECT COUNT(*) FROM inputs", where);
@@ -393,5 +396,29 @@ JobStatus Job::recorded(const std::filesystem::path& dir, std::string* config) {
 }
 
 JobStatus Job::status(const std::filesystem::path& dir) { return recorded(dir, nullptr); }
+
+std::vector<std::string> Job::recorded_inputs(const std::filesystem::path& dir) {
+  const std::filesystem::path file = dir / "job.sqlite";
+  std::vector<std::string> names;
+  if (!std::filesystem::exists(file)) return names;
+  sqlite3* db = open_db(file, false);
+  try {
+    Statement s(db, "SELECT name FROM inputs ORDER BY idx", file.string());
+    while (s.step()) names.push_back(s.text(0));
+  } catch (...) {
+    sqlite3_close(db);
+    throw;
+  }
+  sqlite3_close(db);
+  return names;
+}
+
+void Job::inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) {
+  const std::string where = options_.dir.string();
+  Transaction t(db_, where);
+  insert_inputs(db_, frames, from, where);
+  set_meta(db_, "stage", "integrating", where);
+  t.commit();
+}
 
 }  // namespace sf

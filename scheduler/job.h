@@ -45,6 +45,9 @@ struct JobOptions {
   std::size_t term_after = 0;
   // `scalefuse add`: the inputs may extend the job's (its depth maps first, unchanged).
   bool allow_new_inputs = false;
+  // fuse --follow: the input grows while the job runs (implies allow_new_inputs); recorded so
+  // that `scalefuse resume` keeps the job's order of depth maps.
+  bool follow = false;
 };
 
 struct JobStatus {
@@ -53,6 +56,7 @@ struct JobStatus {
   std::size_t depth_maps = 0, integrated = 0, bricks = 0;
   std::uint64_t tile_bytes = 0, journal_bytes = 0;
   std::string last_checkpoint;  // UTC time, empty if none
+  bool follow = false;          // started by fuse --follow
 };
 
 class Job : public FusionJournal {
@@ -67,6 +71,7 @@ class Job : public FusionJournal {
 
   std::optional<RootCube> fixed_root() const override;
   std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) override;
+  void inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) override;
   void frame_done(std::size_t done, BrickMap& map) override;
   void integrated(BrickMap& map) override;
   void interrupted(std::size_t done, BrickMap& map) override;
@@ -78,6 +83,8 @@ class Job : public FusionJournal {
 
   // Reads a job's status without changing it. Throws InputError if DIR holds no job.
   static JobStatus status(const std::filesystem::path& dir);
+  // The depth maps a job has recorded, in its order (absolute file names).
+  static std::vector<std::string> recorded_inputs(const std::filesystem::path& dir);
   // The configuration, input and output a job was started with (for `scalefuse resume`).
   static JobStatus recorded(const std::filesystem::path& dir, std::string* config);
 

@@ -8,6 +8,10 @@
 #include <iterator>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <thread>
+#include <chrono>
+#include <cstdlib>
+#include <vector>
 
 #include "tests/test_util.h"
 
@@ -215,4 +219,140 @@ TEST(Job, StatusOfAFolderWithoutAJobIsABadInput) {
   EXPECT_NE(r.output.find("not a scalefuse job directory"), std::string::npos) << r.output;
 }
 
+
+namespace {
+
+// The bunny's scan lines of bun.conf: the camera line, then one "bmesh FILE ..." line per scan.
+struct BunnyConf {
+  std::string camera;
+  std::vector<std::string> scans;
+  static std::string file_of(const std::string& line) { return line.substr(6, line.find(' ', 6) - 6); }
+};
+BunnyConf bunny_conf() {
+  BunnyConf c;
+  std::ifstream in(bunny() / "bun.conf");
+  std::string line;
+  std::getline(in, c.camera);
+  while (std::getline(in, line))
+    if (line.rfind("bmesh ", 0) == 0) c.scans.push_back(line);
+  return c;
+}
+
+// Writes `lines` as `folder`/bun.conf the way a careful writer does: a temp file, then rename.
+void write_conf(const fs::path& folder, const std::string& camera, const std::vector<std::string>& lines) {
+  {
+    std::ofstream out(folder / "bun.conf.tmp");
+    out << camera << "\n";
+    for (const auto& l : lines) out << l << "\n";
+  }
+  fs::rename(folder / "bun.conf.tmp", folder / "bun.conf");
+}
+
+// A command run in the background: its exit status lands in DIR/rc.
+struct Background {
+  fs::path rc;
+  Background(const std::string& args, const fs::path& dir, const std::string& env = "") : rc(dir / "rc") {
+    const std::string cmd = "(" + env + " " + test::scalefuse_binary().string() + " " + args + " > " +
+                            (dir / "log").string() + " 2>&1; echo $? > " + (dir / "rc.tmp").string() + "; mv " +
+                            (dir / "rc.tmp").string() + " " + rc.string() + ") &";
+    EXPECT_EQ(std::system(cmd.c_str()), 0);
+  }
+  // The exit status, or -1 after `seconds`.
+  int wait(double seconds) const {
+    for (int i = 0; i < int(seconds * 10); ++i) {
+      if (fs::exists(rc)) return std::stoi(bytes_of(rc));
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    return -1;
+  }
+};
+
+}  // namespace
+
+TEST(Job, FollowIntegratesDepthMapsAsTheyCompleteInArrivalOrder) {
+  const fs::path dir = test::scratch_dir("job-follow");
+  const BunnyConf conf = bunny_conf();
+  ASSERT_EQ(conf.scans.size(), 10u);
+  const std::string scene = kScene + " --bbox=-0.11,0.02,-0.08,0.08,0.2,0.08 -q";
+  // The reference: all ten scans at once, in conf order 0..9.
+  fs::create_directories(dir / "all");
+  for (const auto& l : conf.scans) fs::copy_file(bunny() / BunnyConf::file_of(l), dir / "all" / BunnyConf::file_of(l));
+  write_conf(dir / "all", conf.camera, conf.scans);
+  ASSERT_EQ(scalefuse("fuse " + (dir / "all").string() + " -o " + (dir / "all.ply").string() + " " + scene).code, 0);
+
+  // A live folder: scans 0..2 are there at the start, 3..9 arrive while the job follows; each new
+  // line goes to the top of the conf, so the folder ends up listing 9..3,0,1,2: only the job's
+  // arrival order gives the reference.
+  const fs::path live = dir / "live", job = dir / "job", out = dir / "follow.ply";
+  fs::create_directories(live);
+  std::vector<std::string> listed;
+  auto arrive = [&](std::size_t i, bool slowly) {
+    const std::string file = BunnyConf::file_of(conf.scans[i]);
+    const std::string bytes = bytes_of(bunny() / file);
+    std::ofstream ply(live / file, std::ios::binary);
+    if (slowly) {  // listed while half written, and left so for longer than the settle time
+      ply.write(bytes.data(), std::streamsize(bytes.size() / 2));
+      ply.flush();
+      listed.insert(listed.begin(), conf.scans[i]);
+      write_conf(live, conf.camera, listed);
+      std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+      ply.write(bytes.data() + bytes.size() / 2, std::streamsize(bytes.size() - bytes.size() / 2));
+      ply.close();
+      return;
+    }
+    ply.write(bytes.data(), std::streamsize(bytes.size()));
+    ply.close();
+    listed.insert(i < 3 ? listed.end() : listed.begin(), conf.scans[i]);
+    write_conf(live, conf.camera, listed);
+  };
+  for (std::size_t i = 0; i < 3; ++i) arrive(i, false);
+  fs::create_directories(dir / "run");
+  const Background run("fuse " + live.string() + " -o " + out.string() + " --job " + job.string() +
+                           " --follow --settle-seconds 0.5 --poll-seconds 0.1 --threads 2 --checkpoint-every 2 --stats " +
+                           (dir / "follow.json").string() + " " + kScene + " --bbox=-0.11,0.02,-0.08,0.08,0.2,0.08",
+                       dir / "run");
+  for (std::size_t i = 3; i < 10; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(800));
+    arrive(i, i == 5);
+  }
+  // Let the last scan settle, then stop the feed.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  test::write_text(job / "STOP", "");
+  const int rc = run.wait(300);
+  const std::string log = bytes_of(dir / "run" / "log");
+  ASSERT_EQ(rc, 0) << log;
+  // The half-written scan was listed, stable for longer than the settle time, and not taken.
+  EXPECT_NE(log.find("follow: not taken yet (incomplete or damaged): " + (live / "top2.ply").string()), std::string::npos)
+      << log;
+  EXPECT_TRUE(bytes_of(out) == bytes_of(dir / "all.ply"));
+  EXPECT_FALSE(fs::exists(job / "STOP")) << "a consumed stop file is removed";
+  const auto stats = nlohmann::json::parse(bytes_of(dir / "follow.json"));
+  EXPECT_EQ(stats["depth_maps"], 10);
+  EXPECT_EQ(stats["samples_outside_root"], 0);
+  const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
+  EXPECT_EQ(st["integrated"], 10);
+  EXPECT_EQ(st["stage"], "done");
+  // Resuming the followed job keeps its arrival order (a plain fuse of the folder would take the
+  // listed order and be refused by the job): the same mesh again.
+  fs::remove(out);
+  const CliRun resumed = scalefuse("resume " + job.string() + " -q");
+  ASSERT_EQ(resumed.code, 0) << resumed.output;
+  EXPECT_TRUE(bytes_of(out) == bytes_of(dir / "all.ply"));
+}
+
+TEST(Job, FollowEndsOnSigtermWithACheckpointAndAMesh) {
+  const fs::path dir = test::scratch_dir("job-follow-term");
+  const fs::path ref = dir / "ref.ply", out = dir / "f.ply", job = dir / "f.job";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
+  // SIGTERM after 4 depth maps: the feed ends, the depth maps already found are integrated, and the
+  // job extracts as usual (exit 0), instead of stopping as a plain run does.
+  const CliRun r = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() +
+                                 " -q --follow --poll-seconds 0.1 --settle-seconds 0 " + kScene,
+                             "SCALEFUSE_TEST_TERM_AFTER=4");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(bytes_of(out) == bytes_of(ref));
+  const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
+  EXPECT_EQ(st["stage"], "done");
+  EXPECT_EQ(st["integrated"], 10);
+}
 }  // namespace sf

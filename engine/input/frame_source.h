@@ -3,6 +3,7 @@
 // never holds more than the frames in flight. Formats: see docs/formats.md.
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -32,6 +33,16 @@ class FrameSource {
   // Reads frame i. Thread-safe (const, no shared mutable state). Throws InputError naming the
   // file and the problem on bad data.
   virtual DepthFrame load(std::size_t i) const = 0;
+};
+
+// A source that grows while the fusion runs (fuse --follow): fuse() asks for more once it has
+// integrated everything the source holds.
+class FrameFeed {
+ public:
+  virtual ~FrameFeed() = default;
+  // Blocks until the source holds more than `known` depth maps (true), or the feed has ended
+  // (false: a stop file, a signal, or nothing more to take).
+  virtual bool wait_for_more(std::size_t known) = 0;
 };
 
 // Detects the format of `input` (unless options.format says it) and opens it. Throws InputError if
