@@ -68,6 +68,7 @@ nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
   j["format"] = s.format;
   j["depth_maps"] = s.depth_maps;
   j["resumed_at"] = s.resumed_at;
+  j["brick_level"] = s.brick_level;
   j["samples"] = s.samples;
   j["samples_outside_root"] = s.samples_outside_root;
   j["triangles_in"] = s.triangles;
@@ -101,6 +102,7 @@ void print_summary(const FusionStats& s, const Mesh& mesh, const std::string& ou
                s.samples, s.triangles);
   std::fprintf(stderr, "  root cube        %.4g m at (%.4g, %.4g, %.4g)\n", s.root.size, s.root.min.x(), s.root.min.y(),
                s.root.min.z());
+  std::fprintf(stderr, "  bricks           level %d (%.4g m edge)\n", s.brick_level, s.root.cell_size(s.brick_level));
   if (s.samples_outside_root)
     std::fprintf(stderr, "  outside root     %zu samples of depth maps that arrived while following (dropped; give --bbox)\n",
                  s.samples_outside_root);
@@ -123,6 +125,9 @@ void print_summary(const FusionStats& s, const Mesh& mesh, const std::string& ou
                double(s.peak_rss_bytes) / (1024.0 * 1024.0));
   std::printf("mesh written to %s\n", std::filesystem::absolute(output).string().c_str());
 }
+
+// Thrown by the integrated hook of fuse --integrate-only: the job is checkpointed, stop there.
+struct IntegratedOnly {};
 
 // Parameters that shape the integrated field: a job refuses to resume when they change.
 // (Regularization and extraction may change: they rerun from the job's tiles.)
@@ -234,7 +239,7 @@ void run_fuse(const FuseArgs& a) {
       std::filesystem::remove_all(job_options.dir);
     }
   }
-  auto run_job = [&](Job& job, Mesh& mesh, FusionStats& stats) {
+  auto run_job = [&](Job& job, Mesh& mesh, FusionStats& stats) -> bool {
     write_text_atomically(job.dir() / "config.toml",
                           "# effective configuration of this job (scalefuse resume reads it)\n" + params.assignments());
     if (!a.quiet)
@@ -254,10 +259,16 @@ void run_fuse(const FuseArgs& a) {
     hooks.stop = &g_stop;
     hooks.follow = follow;
     // Past integration a signal ends the process as usual: the job is checkpointed.
-    hooks.integrated = [&] { stop_signals.reset(); };
+    hooks.integrated = [&] {
+      stop_signals.reset();
+      if (a.integrate_only) throw IntegratedOnly{};
+    };
     tbb::task_arena arena(threads);
     try {
       arena.execute([&] { mesh = fuse(*source, options, hooks, &stats, &job); });
+    } catch (const IntegratedOnly&) {
+      printer.finish();
+      return false;
     } catch (const Interrupted& e) {
       printer.finish();
       throw JobInterrupted(std::string(e.what()) + "; checkpoint written; continue with: scalefuse resume " +
@@ -265,15 +276,17 @@ void run_fuse(const FuseArgs& a) {
                            g_signal.load());
     }
     printer.finish();
+    return true;
   };
   // An implicit job whose depth maps changed is started over (once); an explicit one is refused.
   std::optional<Job> job_holder;
   FusionStats stats;
   Mesh mesh;
+  bool extracted = false;
   for (int attempt = 0;; ++attempt) {
     job_holder.emplace(job_options, identity, input_abs, output_abs);
     try {
-      run_job(*job_holder, mesh, stats);
+      extracted = run_job(*job_holder, mesh, stats);
       break;
     } catch (const JobMismatch& e) {
       if (!implicit_job || attempt > 0) throw;
@@ -283,6 +296,18 @@ void run_fuse(const FuseArgs& a) {
     }
   }
   Job& job = *job_holder;
+  auto write_stats = [&] {
+    if (a.stats_json.empty()) return;
+    const std::string tmp = a.stats_json + ".tmp";
+    std::ofstream(tmp) << stats_json(stats, mesh).dump(2) << "\n";
+    std::filesystem::rename(tmp, a.stats_json);
+  };
+  if (!extracted) {
+    write_stats();
+    std::printf("integrated %zu depth maps (bricks of level %d); extract with: scalefuse resume %s\n", stats.depth_maps,
+                stats.brick_level, std::filesystem::absolute(job.dir()).c_str());
+    return;
+  }
   if (mesh.faces.empty()) throw InputError("the fused field has no surface (no zero crossing survived); nothing written");
   write_ply_mesh(a.output, mesh);
   link_into_job(a.output, job.dir() / "mesh.ply");
@@ -293,11 +318,7 @@ void run_fuse(const FuseArgs& a) {
   }
   if (!a.quiet && stats.resumed_at > 0)
     std::fprintf(stderr, "resumed: %zu of %zu depth maps were already integrated\n", stats.resumed_at, stats.depth_maps);
-  if (!a.stats_json.empty()) {
-    const std::string tmp = a.stats_json + ".tmp";
-    std::ofstream(tmp) << stats_json(stats, mesh).dump(2) << "\n";
-    std::filesystem::rename(tmp, a.stats_json);
-  }
+  write_stats();
   if (!a.quiet) print_summary(stats, mesh, a.output);
   else std::printf("mesh written to %s\n", std::filesystem::absolute(a.output).string().c_str());
 }
@@ -338,6 +359,8 @@ void add_fuse_command(CLI::App& app) {
       ->check(CLI::PositiveNumber);
   add_job_options(cmd, *args);
   cmd->add_flag("--print-params", args->print_params, "print the effective parameters and exit");
+  cmd->add_flag("--integrate-only", args->integrate_only,
+                "stop once every depth map is integrated and checkpointed; `scalefuse resume DIR` extracts");
   cmd->callback([args] { run_fuse(*args); });
 }
 

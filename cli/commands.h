@@ -24,6 +24,7 @@ struct FuseArgs {
   std::size_t checkpoint_every = 50;
   double checkpoint_seconds = 300;
   bool quiet = false, print_params = false;
+  bool integrate_only = false;           // stop after the integration's checkpoint (resume extracts)
 };
 void run_fuse(const FuseArgs& args);
 

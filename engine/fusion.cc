@@ -6,18 +6,21 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <filesystem>
 #include <chrono>
 #include <mutex>
 #include <sstream>
 
 #include "engine/error.h"
+#include "engine/hsdf_math.h"
 
 namespace sf {
 
 void OctreeOptions::check() const {
   if (!(padding >= 0 && padding <= 1)) throw InputError("octree.padding must be in [0, 1]");
-  if (brick_level < 0 || brick_level > 10) throw InputError("octree.brick_level must be in 0..10");
+  if (brick_level < -1 || brick_level > 10) throw InputError("octree.brick_level must be -1 (auto) or in 0..10");
   parse_bbox(bbox);
 }
 
@@ -60,7 +63,8 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
         "use CGAL's parallel Delaunay insertion from this many voxels (with > 1 thread)");
   s.add("octree.bbox", &o.octree.bbox, "m", "clip box xmin,ymin,zmin,xmax,ymax,zmax; empty = data bounds");
   s.add("octree.padding", &o.octree.padding, "", "root cube margin, fraction of the data extent per side");
-  s.add("octree.brick_level", &o.octree.brick_level, "level", "2^brick_level bricks per root axis");
+  s.add("octree.brick_level", &o.octree.brick_level, "level",
+        "2^brick_level bricks per root axis; -1 = auto (finest level - 8, in 3..10)");
 }
 
 std::optional<Eigen::AlignedBox3d> parse_bbox(const std::string& text) {
@@ -78,6 +82,13 @@ RootCube root_cube_for(const Eigen::AlignedBox3d& b, double padding) {
   r.size = size;
   r.min = b.center() - Eigen::Vector3d::Constant(size / 2);
   return r;
+}
+
+int auto_brick_level(const RootCube& root, double finest_footprint, const IntegrateOptions& integrate) {
+  const int finest = integrate.single_level >= 0
+                         ? integrate.single_level
+                         : triangle_level(root.size, integrate.lambda, finest_footprint, integrate.max_level);
+  return std::clamp(finest - 8, 3, 10);
 }
 
 std::size_t peak_rss_bytes() {
@@ -147,19 +158,31 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   Eigen::AlignedBox3d bounds;
   std::mutex bounds_mutex;
   std::size_t samples = 0, bounded = 0;
+  // The finest footprint (each depth map's 5th percentile, so a few stray near samples do not
+  // count), for octree.brick_level = auto.
+  double finest_footprint = std::numeric_limits<double>::infinity();
   tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t i) {
     DepthFrame f = source.load(frames[i]);
     if (journal) identities[i] = identity_of(source, frames[i], f);
     clip_to_box(f, clip);
     Eigen::AlignedBox3d b;
-    std::size_t n = 0;
+    std::vector<float> footprints;
+    footprints.reserve(f.size());
     for (std::size_t k = 0; k < f.size(); ++k)
       if (f.valid[k]) {
         b.extend(f.position[k].cast<double>());
-        ++n;
+        footprints.push_back(f.footprint[k]);
       }
+    const std::size_t n = footprints.size();
+    double fine = std::numeric_limits<double>::infinity();
+    if (n) {
+      const auto at = footprints.begin() + std::ptrdiff_t(n / 20);
+      std::nth_element(footprints.begin(), at, footprints.end());
+      fine = *at;
+    }
     std::lock_guard lock(bounds_mutex);
     if (n) bounds.extend(b);
+    finest_footprint = std::min(finest_footprint, fine);
     samples += n;
     report(hooks.progress, "bounds", double(++bounded), double(frames.size()));
   });
@@ -178,7 +201,13 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
 
   // Pass 2: stream the depth maps through read -> triangulate (parallel) -> integrate (in order),
   // in rounds: one over the depth maps present, then (following) one per growth of the source.
-  BrickMap map(options.octree.brick_level);
+  std::optional<int> job_brick_level = journal ? journal->fixed_brick_level() : std::nullopt;
+  const int brick_level = job_brick_level                      ? *job_brick_level
+                          : options.octree.brick_level >= 0    ? options.octree.brick_level
+                          : std::isfinite(finest_footprint)    ? auto_brick_level(root, finest_footprint, options.integrate)
+                                                               : 4;
+  stats.brick_level = brick_level;
+  BrickMap map(brick_level);
   const std::size_t first = journal ? journal->begin(identities, root, map) : 0;
   if (first > frames.size()) throw std::logic_error("journal reports more depth maps than the input has");
   stats.resumed_at = first;
@@ -249,14 +278,18 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   stats.samples += late_samples.load();
   stats.samples_outside_root = outside.load();
   if (journal) journal->integrated(map);
-  if (hooks.integrated) hooks.integrated();
   stats.peak_rss_integrate_bytes = peak_rss_bytes();
   stats.spill = map.spill_stats();
-  map.load_all();
   stats.triangles = integ.triangles;
   stats.contributions = integ.contributions;
   for (int l = 0; l <= kMaxLevel; ++l) stats.triangles_per_level[l] = integ.triangles_per_level[l];
   end_stage("integrate");
+  // The integration's statistics are the caller's even if the integrated hook ends the run here.
+  if (stats_out) *stats_out = stats;
+  if (hooks.integrated) hooks.integrated();
+  stage_start = Clock::now();
+  map.load_all();
+  end_stage("load");
 
   stats.regularize = regularize(map, options.regularize, hooks.progress);
   for (int l = 0; l <= kMaxLevel; ++l) {

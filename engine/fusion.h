@@ -24,7 +24,10 @@ struct OctreeOptions {
   // Clip box "xmin,ymin,zmin,xmax,ymax,zmax" in world metres; empty: the data's bounding box.
   std::string bbox;
   double padding = 0.05;  // the root cube extends the data's largest extent by this fraction per side
-  int brick_level = 4;    // 2^brick_level bricks per axis of the root cube
+  // 2^brick_level bricks per axis of the root cube; -1 (auto): the finest insertion level of the
+  // data - 8 (bricks of 256 finest cells), clamped to [3, 10], so a brick stays small against the
+  // memory budget however wide the scene is.
+  int brick_level = -1;
   void check() const;
 };
 
@@ -51,6 +54,7 @@ struct FusionStats {
   std::size_t depth_maps = 0, samples = 0, triangles = 0, contributions = 0;
   std::size_t samples_outside_root = 0;  // fuse --follow: samples of later depth maps outside the root cube
   std::size_t resumed_at = 0;  // depth maps already integrated by an earlier run of the job
+  int brick_level = 0;         // the one used (octree.brick_level, or chosen by auto)
   RootCube root;
   std::array<std::size_t, kMaxLevel + 1> voxels_fused{};        // after integration
   std::array<std::size_t, kMaxLevel + 1> voxels_regularized{};  // after section 6
@@ -104,6 +108,8 @@ class FusionJournal {
   // The root cube of an existing job (depth maps added later must land in the same octree);
   // nullopt for a new job, whose root comes from the data.
   virtual std::optional<RootCube> fixed_root() const = 0;
+  // The brick level of an existing job (its tiles are cut that way); nullopt for a new job.
+  virtual std::optional<int> fixed_brick_level() const { return std::nullopt; }
   // Returns how many depth maps (a prefix, in input order) the map already holds after restoring
   // it from the last checkpoint; 0 for a new job. Throws InputError if the job was started on
   // other inputs or another configuration.
@@ -122,6 +128,9 @@ class FusionJournal {
 // integration resumes from, and checkpoints into, the journal's job.
 Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats,
           FusionJournal* journal = nullptr);
+
+// octree.brick_level = auto: the finest insertion level of the data minus 8, in [3, 10].
+int auto_brick_level(const RootCube& root, double finest_footprint, const IntegrateOptions& integrate);
 
 // The root cube for a set of sample bounds (see OctreeOptions).
 RootCube root_cube_for(const Eigen::AlignedBox3d& data_bounds, double padding);

@@ -228,6 +228,12 @@ std::optional<RootCube> Job::fixed_root() const {
   return parse_root(text, where);
 }
 
+std::optional<int> Job::fixed_brick_level() const {
+  const std::string text = meta(db_, "brick_level", options_.dir.string());
+  if (text.empty()) return std::nullopt;
+  return std::stoi(text);
+}
+
 std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) {
   const std::string where = options_.dir.string();
   map.attach_store(store_.get(), options_.memory_limit);

@@ -70,6 +70,7 @@ class Job : public FusionJournal {
   Job& operator=(const Job&) = delete;
 
   std::optional<RootCube> fixed_root() const override;
+  std::optional<int> fixed_brick_level() const override;
   std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) override;
   void inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) override;
   void frame_done(std::size_t done, BrickMap& map) override;

@@ -1,5 +1,7 @@
 #include "storage/brick_map.h"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <mutex>
 #include <stdexcept>
@@ -133,6 +135,9 @@ void BrickMap::enforce_limit() {
     b->resident = false;
     ++spill_.spilled;
   }
+  // The spilled bricks' blocks were many small allocations, freed from several threads' malloc
+  // arenas: hand the free pages back, or the process keeps them although the budget is met.
+  ::malloc_trim(0);
 }
 
 std::vector<ManifestEntry> BrickMap::write_checkpoint() {

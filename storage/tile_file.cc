@@ -1,6 +1,7 @@
 #include "storage/tile_file.h"
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <lz4.h>
 #include <unistd.h>
 
@@ -17,6 +18,31 @@
 
 namespace sf {
 namespace {
+
+// A tile's raw and compressed images can be hundreds of MB. Kept in pages mapped for the purpose
+// and unmapped after, they go back to the system at once: through malloc they would raise its
+// mmap threshold and then sit in the heap, where the brick cache's budget does not see them.
+class PageBuffer {
+ public:
+  explicit PageBuffer(std::size_t size) : size_(size) {
+    if (size_ == 0) return;
+    void* p = ::mmap(nullptr, size_, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    data_ = static_cast<unsigned char*>(p);
+  }
+  ~PageBuffer() {
+    if (data_) ::munmap(data_, size_);
+  }
+  PageBuffer(const PageBuffer&) = delete;
+  PageBuffer& operator=(const PageBuffer&) = delete;
+  unsigned char* data() { return data_; }
+  const unsigned char* data() const { return data_; }
+  std::size_t size() const { return size_; }
+
+ private:
+  std::size_t size_ = 0;
+  unsigned char* data_ = nullptr;
+};
 
 constexpr char kMagic[8] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
 constexpr std::size_t kHeaderBytes = 64;  // 56 bytes of fields + their checksum
@@ -82,7 +108,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   if (raw_size > std::size_t(LZ4_MAX_INPUT_SIZE))
     throw std::length_error(path.string() + ": brick too large for one tile (" + std::to_string(raw_size) +
                             " bytes); use a finer octree.brick_level");
-  std::vector<unsigned char> raw(raw_size);
+  PageBuffer raw(raw_size);
   unsigned char* p = raw.data();
   for (const BlockView& b : blocks) {
     put64(p, b.origin.bits);
@@ -96,7 +122,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
       put_float(p + 20, v.colour_weight);
     }
   }
-  std::vector<unsigned char> stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))));
+  PageBuffer stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))));
   const int packed = raw_size == 0 ? 0
                                    : LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
                                                           reinterpret_cast<char*>(stored.data() + kHeaderBytes),
@@ -179,11 +205,11 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out) {
   // LZ4 expands at most 255:1; a larger raw size is a lie, not an allocation to make.
   if (raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE) || raw_size > 255 * stored_size + 16)
     throw bad("implausible raw size " + std::to_string(raw_size));
-  std::vector<unsigned char> stored(stored_size);
+  PageBuffer stored(stored_size);
   in.read(reinterpret_cast<char*>(stored.data()), std::streamsize(stored_size));
   if (!in) throw bad("cannot read the payload");
   if (get64(h + 48) != fnv1a64(stored.data(), stored.size())) throw bad("payload checksum mismatch");
-  std::vector<unsigned char> raw(raw_size);
+  PageBuffer raw(raw_size);
   if (raw_size > 0) {
     const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(stored.data()), reinterpret_cast<char*>(raw.data()),
                                       int(stored_size), int(raw_size));

@@ -6,6 +6,7 @@
 
 #include "engine/error.h"
 #include "engine/meshio/ply_io.h"
+#include "engine/synth/city.h"
 #include "engine/synth/mesh_query.h"
 #include "engine/synth/shapes.h"
 #include "engine/synth/synth.h"
@@ -225,4 +226,40 @@ TEST(SynthRender, OptionsAreChecked) {
 }
 
 }  // namespace
+TEST(SynthCity, BlockLayoutViewsAndFootprints) {
+  // Two sphere "statues" (alternating), small images: the layout, not the size, is under test.
+  const std::vector<Mesh> props = {make_sphere(Eigen::Vector3d::Zero(), 1.0, 3),
+                                   make_box(Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1, 2, 1))};
+  CityOptions o;
+  o.props = 3;
+  o.far_views = 4;
+  o.facade_views = 2;
+  o.street_views = 6;
+  o.width = 120;
+  o.height = 90;
+  const SyntheticScene scene = render_city(props, o);
+  ASSERT_EQ(scene.views.size(), 12u);
+  EXPECT_EQ(scene.views[0].name, "far_000");
+  EXPECT_EQ(scene.views[4].name, "facade_000");
+  EXPECT_EQ(scene.views[6].name, "street_000");
+  for (const auto& v : scene.views) {
+    EXPECT_GT(v.valid_pixels, v.size() / 10) << v.name;
+    EXPECT_EQ(v.close, v.name.rfind("street_", 0) == 0) << v.name;
+  }
+  // Ground slab (12 triangles), 8 buildings (+ set-backs), 3 plinths, 3 statues.
+  EXPECT_GT(scene.reference.faces.size(), 12u + 8 * 12 + 3 * 12 + 2 * 1280);
+  // The far views see the block from ~85 m; the street views see their statue from ~3 m.
+  EXPECT_GT(scene.coarse_footprint, 40.0 / (o.focal * o.width));
+  EXPECT_LT(scene.fine_footprint, 4.0 / (o.focal * o.width));
+  // Statue 0 is the close-up: a statue of height 1.2-2 m on a 0.8 m plinth.
+  EXPECT_GT(scene.focus.y(), 0.8 + 0.6 - 1e-9);
+  EXPECT_LT(scene.focus.y(), 0.8 + 1.0 + 1e-9);
+  EXPECT_GT(scene.close_radius, 0.6);
+  // Seeded: the same options give the same depths.
+  const SyntheticScene again = render_city(props, o);
+  EXPECT_TRUE(again.views[7].depth == scene.views[7].depth);
+  o.props = 0;
+  test::expect_input_error([&] { render_city(props, o); }, "synth --city", "--props");
+}
+
 }  // namespace sf

@@ -376,20 +376,32 @@ SyntheticScene render_scene(const Mesh& mesh, const SynthOptions& o, const Progr
   }
 
   // Noise, after the footprints were measured on the exact depths.
-  if (o.noise > 0) {
-    for (std::size_t v = 0; v < scene.views.size(); ++v) {
-      SynthView& view = scene.views[v];
-      std::mt19937_64 rng(view_seed(o.seed, v));
-      std::normal_distribution<double> gauss(0.0, 1.0);
-      const double sigma_per_z = o.noise / std::sqrt(view.sensor.fx * view.sensor.fy);
-      for (float& z : view.depth) {
-        if (!(z > 0)) continue;
-        const double noisy = z * (1.0 + sigma_per_z * gauss(rng));
-        if (noisy > 0) z = float(noisy);
-      }
+  add_depth_noise(scene.views, o.noise, o.seed);
+  return scene;
+}
+
+void render_views(const Mesh& mesh, std::vector<SynthView>& views, const ProgressFn& progress) {
+  const Caster caster(mesh);
+  if (caster.query.empty()) throw InputError("synth: the mesh has only degenerate triangles");
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    cast_view(caster, views[i]);
+    report(progress, "render", double(i + 1), double(views.size()));
+  }
+}
+
+void add_depth_noise(std::vector<SynthView>& views, double noise, std::uint64_t seed) {
+  if (!(noise > 0)) return;
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    SynthView& view = views[v];
+    std::mt19937_64 rng(view_seed(seed, v));
+    std::normal_distribution<double> gauss(0.0, 1.0);
+    const double sigma_per_z = noise / std::sqrt(view.sensor.fx * view.sensor.fy);
+    for (float& z : view.depth) {
+      if (!(z > 0)) continue;
+      const double noisy = z * (1.0 + sigma_per_z * gauss(rng));
+      if (noisy > 0) z = float(noisy);
     }
   }
-  return scene;
 }
 
 }  // namespace sf

@@ -111,6 +111,15 @@ SyntheticScene render_scene(const Mesh& mesh, const SynthOptions& options, const
 // Exposed for tests and tools; render_scene builds the query structure once for all views.
 void render_view(const Mesh& mesh, SynthView& view);
 
+// Ray-casts every view of `views` (name, size and sensor set) against one query structure built
+// once for `mesh`, as render_view does; views that see nothing keep valid_pixels == 0. Progress
+// stage "render" counts views.
+void render_views(const Mesh& mesh, std::vector<SynthView>& views, const ProgressFn& progress = {});
+
+// Gaussian depth noise along the optical axis, sigma = noise * the pixel's footprint, drawn per
+// view from splitmix(seed, view index) so that it does not depend on threads.
+void add_depth_noise(std::vector<SynthView>& views, double noise, std::uint64_t seed);
+
 // Camera at `centre` looking at `target`, image y pointing along -up as far as possible.
 Sensor look_at(const Eigen::Vector3d& centre, const Eigen::Vector3d& target, double focal_px, int width,
                int height, const Eigen::Vector3d& up = Eigen::Vector3d::UnitY());
