@@ -71,6 +71,14 @@ TEST(Job, MeshIsByteIdenticalAcrossThreadsAndMemoryLimits) {
       ASSERT_EQ(r.code, 0) << r.output;
       EXPECT_TRUE(bytes_of(out) == expected) << "threads " << threads << ", memory " << memory;
     }
+  // Nor on the brick size (the auto level here is 3: 8 bricks per axis).
+  for (const char* level : {"2", "5"}) {
+    const fs::path out = dir / numbered("b", std::stoi(level), ".ply");
+    const CliRun r = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " -q --memory-limit 8M " + kScene +
+                               " --set octree.brick_level=" + level);
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_TRUE(bytes_of(out) == expected) << "brick level " << level;
+  }
   // The tightest limit really spilled: the job holds tiles of every brick.
   const CliRun st = scalefuse("status " + (dir / "m5.ply.job").string() + " --json");
   ASSERT_EQ(st.code, 0) << st.output;
