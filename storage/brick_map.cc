@@ -20,6 +20,9 @@ BrickCoord brick_of(VoxelKey key, int brick_level) {
   return BrickCoord{axis(key.x()), axis(key.y()), axis(key.z())};
 }
 
+// Memory a resident brick holds: its blocks and index, and the brick itself.
+static std::size_t resident_size(const Brick& b) { return b.voxels.memory_bytes() + sizeof(Brick); }
+
 BrickMap::BrickMap(int brick_level) : brick_level_(brick_level) {}
 
 std::size_t BrickMap::brick_count() const {
@@ -42,7 +45,10 @@ Brick& BrickMap::brick(BrickCoord c) {
   }
   std::unique_lock lock(bricks_mutex_);
   auto& slot = bricks_[id];
-  if (!slot) slot = std::make_unique<Brick>(c, brick_level_);
+  if (!slot) {
+    slot = std::make_unique<Brick>(c, brick_level_);
+    resident_bytes_ += std::int64_t(sizeof(Brick) + slot->voxels.memory_bytes());
+  }
   return *slot;
 }
 
@@ -58,19 +64,25 @@ void BrickMap::apply(std::vector<Contribution>& batch) {
   Brick* current = nullptr;
   std::uint64_t current_id = ~std::uint64_t{0};
   std::unique_lock<std::mutex> lock;
+  std::int64_t before = 0;  // the current brick's bytes when its lock was taken
   for (const Contribution& c : batch) {
     const BrickCoord bc = brick_of(c.key, brick_level_);
     if (bc.packed() != current_id) {
-      if (lock.owns_lock()) lock.unlock();
+      if (lock.owns_lock()) {
+        resident_bytes_ += std::int64_t(current->voxels.memory_bytes()) - before;
+        lock.unlock();
+      }
       current = &brick(bc);
       current_id = bc.packed();
       lock = std::unique_lock<std::mutex>(current->mutex);
       make_resident(*current);
       current->dirty = true;
       current->last_use = epoch_;
+      before = std::int64_t(current->voxels.memory_bytes());
     }
     accumulate(current->voxels.find_or_insert(c.key), c.distance, c.weight, c.has_colour ? c.colour : nullptr);
   }
+  if (lock.owns_lock()) resident_bytes_ += std::int64_t(current->voxels.memory_bytes()) - before;
 }
 
 BlockRef BrickMap::block(VoxelKey key) {
@@ -79,12 +91,16 @@ BlockRef BrickMap::block(VoxelKey key) {
   make_resident(b);
   b.dirty = true;
   b.last_use = epoch_;
-  return b.voxels.block(key, true);
+  const std::int64_t before = std::int64_t(b.voxels.memory_bytes());
+  const BlockRef ref = b.voxels.block(key, true);
+  resident_bytes_ += std::int64_t(b.voxels.memory_bytes()) - before;
+  return ref;
 }
 
 void BrickMap::make_resident(Brick& b) {
   if (b.resident) return;
   store_->read(b.coord, b.generation, b.voxels);
+  resident_bytes_ += std::int64_t(resident_size(b));
   b.resident = true;
   b.dirty = false;
   ++spill_.reloaded;
@@ -101,36 +117,32 @@ void BrickMap::write_tile_of(Brick& b) {
   b.dirty = false;
 }
 
-// Memory a resident brick holds: its blocks and index, and the brick itself.
-static std::size_t resident_size(const Brick& b) { return b.voxels.memory_bytes() + sizeof(Brick); }
 
 void BrickMap::attach_store(const TileStore* store, std::size_t memory_limit) {
   store_ = store;
   memory_limit_ = memory_limit;
 }
 
-std::size_t BrickMap::resident_bytes() const {
-  std::size_t n = 0;
-  for (Brick* b : bricks())
-    if (b->resident) n += resident_size(*b);
-  return n;
-}
+std::size_t BrickMap::resident_bytes() const { return std::size_t(std::max<std::int64_t>(0, resident_bytes_.load())); }
 
 void BrickMap::enforce_limit() {
-  if (!store_) return;
+  if (!store_ || resident_bytes() <= memory_limit_) return;
+  // Spill down to 7/8 of the limit, so that the next depth maps (or chunks) do not find it full
+  // again at once: each spill round sorts every resident brick.
+  const std::size_t target = memory_limit_ - memory_limit_ / 8;
   std::vector<Brick*> resident;
-  std::size_t bytes = 0;
-  for (Brick* b : bricks())
-    if (b->resident) {
-      resident.push_back(b);
-      bytes += resident_size(*b);
-    }
-  if (bytes <= memory_limit_) return;
-  std::stable_sort(resident.begin(), resident.end(), [](Brick* a, Brick* b) { return a->last_use < b->last_use; });
+  {
+    std::shared_lock lock(bricks_mutex_);
+    for (auto& [id, b] : bricks_)
+      if (b->resident) resident.push_back(b.get());
+  }
+  std::sort(resident.begin(), resident.end(), [](Brick* a, Brick* b) {
+    return a->last_use != b->last_use ? a->last_use < b->last_use : a->coord.packed() < b->coord.packed();
+  });
   for (Brick* b : resident) {
-    if (bytes <= memory_limit_) break;
-    bytes -= resident_size(*b);
+    if (resident_bytes() <= target) break;
     if (b->dirty || b->generation == 0) write_tile_of(*b);
+    resident_bytes_ -= std::int64_t(resident_size(*b));
     b->voxels.clear();
     b->resident = false;
     ++spill_.spilled;
@@ -163,6 +175,7 @@ void BrickMap::restore(const std::vector<ManifestEntry>& manifest, std::uint64_t
   clear();
   for (const ManifestEntry& e : manifest) {
     Brick& b = brick(e.coord);
+    resident_bytes_ -= std::int64_t(resident_size(b));
     b.resident = false;
     b.dirty = false;
     b.generation = b.checkpoint_generation = e.generation;
@@ -202,6 +215,7 @@ std::vector<Brick*> BrickMap::bricks() const {
 void BrickMap::clear() {
   std::unique_lock lock(bricks_mutex_);
   bricks_.clear();
+  resident_bytes_ = 0;
 }
 
 void BrickMap::compact() {
@@ -213,6 +227,10 @@ void BrickMap::compact() {
     else
       ++it;
   }
+  std::int64_t n = 0;
+  for (auto& [id, b] : bricks_)
+    if (b->resident) n += std::int64_t(resident_size(*b));
+  resident_bytes_ = n;
 }
 
 }  // namespace sf

@@ -128,6 +128,9 @@ class BrickMap {
   std::size_t memory_limit_ = 0;
   std::uint64_t epoch_ = 1, next_generation_ = 1;
   SpillStats spill_;
+  // Σ over resident bricks of their blocks, index and Brick, kept up to date as blocks are made,
+  // bricks load and spill, so that enforce_limit() costs nothing while under the limit.
+  std::atomic<std::int64_t> resident_bytes_{0};
   mutable std::shared_mutex bricks_mutex_;
   std::unordered_map<std::uint64_t, std::unique_ptr<Brick>> bricks_;
 };

@@ -70,6 +70,33 @@ TEST(BrickStore, SpillingUnderATinyBudgetChangesNoVoxel) {
     spilled.enforce_limit();
     EXPECT_EQ(spilled.resident_bytes(), 0u);
   }
+  // The running count of resident bytes (what enforce_limit reads) matches a recount; under a
+  // budget of half the field, spilling stops at 7/8 of the budget.
+  auto recount = [](BrickMap& m) {
+    std::size_t n = 0;
+    for (Brick* b : m.bricks())
+      if (b->resident) n += b->voxels.memory_bytes() + sizeof(Brick);
+    return n;
+  };
+  {
+    BrickMap half(3);
+    TileStore store2(dir / "tiles2");
+    std::size_t full = 0;
+    for (int i = 0; i < 4; ++i) {
+      const DepthFrame f = wavy_view(0.3 * i);
+      integrate_frame(f, triangulate(f, {}), root, {}, half);
+      full = half.resident_bytes();
+    }
+    EXPECT_EQ(full, recount(half));
+    EXPECT_GT(full, 100000u);
+    half.attach_store(&store2, full / 2);
+    half.enforce_limit();
+    EXPECT_EQ(half.resident_bytes(), recount(half));
+    EXPECT_LE(half.resident_bytes(), full / 2 - full / 16);
+    EXPECT_GT(half.resident_bytes(), full / 4);
+    half.load_all();
+    EXPECT_EQ(half.resident_bytes(), full);
+  }
   EXPECT_GT(spilled.spill_stats().spilled, 10u);
   EXPECT_GT(spilled.spill_stats().reloaded, 10u);
   spilled.load_all();
