@@ -126,9 +126,6 @@ void print_summary(const FusionStats& s, const Mesh& mesh, const std::string& ou
   std::printf("mesh written to %s\n", std::filesystem::absolute(output).string().c_str());
 }
 
-// Thrown by the integrated hook of fuse --integrate-only: the job is checkpointed, stop there.
-struct IntegratedOnly {};
-
 // Parameters that shape the integrated field: a job refuses to resume when they change.
 // (Regularization and extraction may change: they rerun from the job's tiles.)
 const std::vector<std::string> kIntegrationParameters = {"input.", "triangulate.", "integrate.", "octree."};
@@ -259,16 +256,11 @@ void run_fuse(const FuseArgs& a) {
     hooks.stop = &g_stop;
     hooks.follow = follow;
     // Past integration a signal ends the process as usual: the job is checkpointed.
-    hooks.integrated = [&] {
-      stop_signals.reset();
-      if (a.integrate_only) throw IntegratedOnly{};
-    };
+    hooks.integrated = [&] { stop_signals.reset(); };
+    hooks.stop_after_integration = a.integrate_only;
     tbb::task_arena arena(threads);
     try {
       arena.execute([&] { mesh = fuse(*source, options, hooks, &stats, &job); });
-    } catch (const IntegratedOnly&) {
-      printer.finish();
-      return false;
     } catch (const Interrupted& e) {
       printer.finish();
       throw JobInterrupted(std::string(e.what()) + "; checkpoint written; continue with: scalefuse resume " +
@@ -276,7 +268,7 @@ void run_fuse(const FuseArgs& a) {
                            g_signal.load());
     }
     printer.finish();
-    return true;
+    return !a.integrate_only;
   };
   // An implicit job whose depth maps changed is started over (once); an explicit one is refused.
   std::optional<Job> job_holder;

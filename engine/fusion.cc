@@ -218,6 +218,14 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   };
   std::size_t next = first, done = first;
   std::atomic<std::size_t> outside{0}, late_samples{0};
+  std::size_t item_bytes_max = 0;  // the largest depth map in flight so far (serial stage only)
+  auto item_bytes = [](const Item& item) {
+    const DepthFrame& f = item.frame;
+    return f.valid.capacity() + f.position.capacity() * sizeof(f.position[0]) +
+           f.image_pos.capacity() * sizeof(f.image_pos[0]) + f.footprint.capacity() * sizeof(float) +
+           f.confidence.capacity() * sizeof(float) + f.colour.capacity() * sizeof(Rgb8) +
+           item.triangles.capacity() * sizeof(FrameTriangle);
+  };
   IntegrateStats integ;
   const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
   const std::atomic<bool>* stop = hooks.follow ? nullptr : hooks.stop;
@@ -254,6 +262,10 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
               // Depth maps enter the field strictly in index order (equations 2-3 are order-sensitive
               // in floating point).
               map.next_epoch();
+              // The memory limit covers the depth maps in flight too: each holds a frame and its
+              // triangles, and integration builds tables about as large again for the one it runs.
+              item_bytes_max = std::max(item_bytes_max, item_bytes(*item));
+              map.set_reserve((tokens + 1) * item_bytes_max);
               integ.add(integrate_frame(item->frame, item->triangles, root, options.integrate, map));
               ++done;
               if (journal) journal->frame_done(done, map);
@@ -284,9 +296,13 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   stats.contributions = integ.contributions;
   for (int l = 0; l <= kMaxLevel; ++l) stats.triangles_per_level[l] = integ.triangles_per_level[l];
   end_stage("integrate");
-  // The integration's statistics are the caller's even if the integrated hook ends the run here.
-  if (stats_out) *stats_out = stats;
   if (hooks.integrated) hooks.integrated();
+  if (hooks.stop_after_integration) {
+    stats.voxels_fused = map.live_voxels_per_level();  // brick by brick, within the budget
+    stats.peak_rss_bytes = peak_rss_bytes();
+    if (stats_out) *stats_out = stats;
+    return Mesh{};
+  }
   stage_start = Clock::now();
   map.load_all();
   end_stage("load");

@@ -81,6 +81,9 @@ struct FusionHooks {
   // start; later samples outside it are dropped (counted in FusionStats::samples_outside_root).
   // `stop` is not read while following: the feed watches for signals and ends.
   FrameFeed* follow = nullptr;
+  // Return an empty mesh once the integration is checkpointed (fuse --integrate-only); the stats
+  // then hold the integration's figures and the fused voxels per level.
+  bool stop_after_integration = false;
 };
 
 // fuse() was stopped through FusionHooks::stop; the journal holds a checkpoint of `done` maps.

@@ -125,11 +125,27 @@ void BrickMap::attach_store(const TileStore* store, std::size_t memory_limit) {
 
 std::size_t BrickMap::resident_bytes() const { return std::size_t(std::max<std::int64_t>(0, resident_bytes_.load())); }
 
+std::array<std::size_t, kMaxLevel + 1> BrickMap::live_voxels_per_level() const {
+  std::array<std::size_t, kMaxLevel + 1> n{};
+  VoxelTable scratch(brick_level_);
+  for (Brick* b : bricks()) {
+    const VoxelTable* table = &b->voxels;
+    if (!b->resident) {
+      scratch.clear();
+      store_->read(b->coord, b->generation, scratch);
+      table = &scratch;
+    }
+    table->for_each([&](VoxelKey k, const VoxelData&) { ++n[std::size_t(k.level())]; });
+  }
+  return n;
+}
+
 void BrickMap::enforce_limit() {
-  if (!store_ || resident_bytes() <= memory_limit_) return;
-  // Spill down to 7/8 of the limit, so that the next depth maps (or chunks) do not find it full
+  const std::size_t budget = brick_budget();
+  if (!store_ || resident_bytes() <= budget) return;
+  // Spill down to 7/8 of the budget, so that the next depth maps (or chunks) do not find it full
   // again at once: each spill round sorts every resident brick.
-  const std::size_t target = memory_limit_ - memory_limit_ / 8;
+  const std::size_t target = budget - budget / 8;
   std::vector<Brick*> resident;
   {
     std::shared_lock lock(bricks_mutex_);

@@ -6,6 +6,8 @@
 // next brick, except at the root's upper faces. Bricks are the unit that later stages page to
 // disk and process independently, so all access goes through a brick.
 #include <cstdint>
+#include <algorithm>
+#include <array>
 #include <atomic>
 #include <memory>
 #include <mutex>
@@ -99,6 +101,12 @@ class BrickMap {
   // duration. A brick touched again is reloaded from its tile under its own lock.
   void attach_store(const TileStore* store, std::size_t memory_limit);
   bool spills() const { return store_ != nullptr; }
+  // Memory the caller holds outside the bricks (depth maps in flight and their working sets): the
+  // bricks get the limit minus this, but at least a quarter of the limit.
+  void set_reserve(std::size_t bytes) { reserve_ = bytes; }
+  std::size_t brick_budget() const {
+    return std::max(memory_limit_ / 4, memory_limit_ > reserve_ ? memory_limit_ - reserve_ : std::size_t{0});
+  }
   // Starts a new access epoch (one per depth map, or per chunk of one).
   void next_epoch() { ++epoch_; }
   // Spills least recently used bricks (ties by coordinate) until resident memory fits the limit.
@@ -114,6 +122,9 @@ class BrickMap {
   // Makes every brick resident (for stages that do not page yet: regularization, extraction).
   void load_all();
   std::size_t resident_bytes() const;
+  // Live voxels per octree level over every brick, reading spilled bricks' tiles one at a time
+  // into a scratch table (memory: one brick). Not safe concurrently with any other access.
+  std::array<std::size_t, kMaxLevel + 1> live_voxels_per_level() const;
   std::uint64_t max_generation() const { return next_generation_ - 1; }
   const SpillStats& spill_stats() const { return spill_; }
 
@@ -125,7 +136,7 @@ class BrickMap {
 
   int brick_level_;
   const TileStore* store_ = nullptr;
-  std::size_t memory_limit_ = 0;
+  std::size_t memory_limit_ = 0, reserve_ = 0;
   std::uint64_t epoch_ = 1, next_generation_ = 1;
   SpillStats spill_;
   // Σ over resident bricks of their blocks, index and Brick, kept up to date as blocks are made,

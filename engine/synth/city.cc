@@ -140,17 +140,23 @@ SyntheticScene render_city(const std::vector<Mesh>& props, const CityOptions& o,
     const Eigen::Vector3d eye(x + 6.0 * (unit(rng) - 0.5), 2.0 + 8.0 * unit(rng), kFrontZ + 25.0);
     add_view("facade", i, false, eye, Eigen::Vector3d(x, 8.0, kFrontZ));
   }
-  // Street: each statue from eye height, on an arc facing the plaza (+z), 150 degrees wide.
-  for (int i = 0; i < o.street_views; ++i) {
-    const int k = i % o.props;
-    const int j = i / o.props, per = (o.street_views - k + o.props - 1) / o.props;  // j-th of `per` views of k
+  // Street: each statue from eye height, on an arc facing the plaza (+z), 150 degrees wide; a
+  // statue's views are consecutive, as a photographer walking round it takes them.
+  for (int k = 0, i = 0; k < o.props; ++k) {
+    const int per = o.street_views / o.props + (k < o.street_views % o.props ? 1 : 0);
     const Statue& s = statues[std::size_t(k)];
-    const double a = (-75.0 + 150.0 * (j + 0.5) / std::max(1, per)) * kPi / 180.0;
-    const double d = o.street_distance * (0.9 + 0.2 * unit(rng));
-    const Eigen::Vector3d eye = s.base + Eigen::Vector3d(d * std::sin(a), 1.6 - kPlinthHeight + 0.4 * unit(rng), d * std::cos(a));
-    add_view("street", i, true, Eigen::Vector3d(eye.x(), std::max(eye.y(), 1.2), eye.z()), s.centre());
+    for (int j = 0; j < per; ++j, ++i) {
+      const double a = (-75.0 + 150.0 * (j + 0.5) / per) * kPi / 180.0;
+      const double d = o.street_distance * (0.9 + 0.2 * unit(rng));
+      const Eigen::Vector3d eye =
+          s.base + Eigen::Vector3d(d * std::sin(a), 1.6 - kPlinthHeight + 0.4 * unit(rng), d * std::cos(a));
+      add_view("street", i, true, Eigen::Vector3d(eye.x(), std::max(eye.y(), 1.2), eye.z()), s.centre());
+    }
   }
-
+  std::vector<std::size_t> statue_of_street_view;
+  for (int k = 0; k < o.props; ++k)
+    for (int j = 0; j < o.street_views / o.props + (k < o.street_views % o.props ? 1 : 0); ++j)
+      statue_of_street_view.push_back(std::size_t(k));
   render_views(city, views, progress);
   for (const SynthView& v : views)
     if (v.valid_pixels == 0) throw InputError("synth --city: view " + v.name + " sees no surface");
@@ -162,7 +168,7 @@ SyntheticScene render_city(const std::vector<Mesh>& props, const CityOptions& o,
     const double fv = std::sqrt(v.sensor.fx * v.sensor.fy);
     if (v.name.rfind("far_", 0) == 0) far_fp.push_back(v.median_footprint);
     if (v.name.rfind("street_", 0) != 0) continue;
-    const Statue& s = statues[std::stoul(v.name.substr(7)) % statues.size()];
+    const Statue& s = statues[statue_of_street_view[std::stoul(v.name.substr(7))]];
     const double z_max = (v.sensor.R * s.centre() + v.sensor.t).z() + s.radius;
     for (std::size_t p = 0; p < v.depth.size(); p += 7)  // a 1/7 subsample is plenty for a median
       if (v.depth[p] > 0 && v.depth[p] <= z_max) street_fp.push_back(v.depth[p] / fv);
