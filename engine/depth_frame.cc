@@ -8,6 +8,11 @@
 
 namespace sf {
 
+std::size_t DepthFrame::memory_bytes() const {
+  return valid.capacity() + position.capacity() * sizeof(position[0]) + image_pos.capacity() * sizeof(image_pos[0]) +
+         footprint.capacity() * sizeof(float) + confidence.capacity() * sizeof(float) + colour.capacity() * sizeof(Rgb8);
+}
+
 std::size_t DepthFrame::valid_count() const {
   std::size_t n = 0;
   for (auto v : valid) n += v ? 1 : 0;

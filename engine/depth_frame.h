@@ -66,6 +66,7 @@ struct DepthFrame {
 
   std::size_t size() const { return std::size_t(width) * std::size_t(height); }
   std::size_t valid_count() const;
+  std::size_t memory_bytes() const;  // heap bytes of the per-sample arrays
   // A hash of everything the fusion reads: size, sensor, and every sample's validity, position,
   // footprint, confidence and colour. A job compares it to notice changed inputs.
   std::uint64_t content_hash() const;

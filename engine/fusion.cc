@@ -118,12 +118,6 @@ FrameIdentity identity_of(const FrameSource& source, std::size_t index, const De
   return id;
 }
 
-std::size_t count_valid(const DepthFrame& f) {
-  std::size_t n = 0;
-  for (std::size_t k = 0; k < f.size(); ++k) n += f.valid[k] ? 1 : 0;
-  return n;
-}
-
 }  // namespace
 
 Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats_out,
@@ -220,11 +214,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   std::atomic<std::size_t> outside{0}, late_samples{0};
   std::size_t item_bytes_max = 0;  // the largest depth map in flight so far (serial stage only)
   auto item_bytes = [](const Item& item) {
-    const DepthFrame& f = item.frame;
-    return f.valid.capacity() + f.position.capacity() * sizeof(f.position[0]) +
-           f.image_pos.capacity() * sizeof(f.image_pos[0]) + f.footprint.capacity() * sizeof(float) +
-           f.confidence.capacity() * sizeof(float) + f.colour.capacity() * sizeof(Rgb8) +
-           item.triangles.capacity() * sizeof(FrameTriangle);
+    return item.frame.memory_bytes() + item.triangles.capacity() * sizeof(FrameTriangle);
   };
   IntegrateStats integ;
   const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
@@ -249,9 +239,9 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
                   item->frame = source.load(frames[item->index]);
                   clip_to_box(item->frame, clip);
                   if (item->index >= initial_frames) {  // arrived while following
-                    const std::size_t before = count_valid(item->frame);
+                    const std::size_t before = item->frame.valid_count();
                     clip_to_box(item->frame, root_box);
-                    const std::size_t after = count_valid(item->frame);
+                    const std::size_t after = item->frame.valid_count();
                     outside += before - after;
                     late_samples += after;
                   }

@@ -363,4 +363,24 @@ TEST(Job, FollowEndsOnSigtermWithACheckpointAndAMesh) {
   EXPECT_EQ(st["stage"], "done");
   EXPECT_EQ(st["integrated"], 10);
 }
+TEST(Job, IntegrateOnlyStopsAtTheCheckpointAndResumeExtractsTheSameMesh) {
+  const fs::path dir = test::scratch_dir("job-integrate-only");
+  const fs::path ref = dir / "ref.ply", out = dir / "i.ply", job = dir / "i.job";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q --stats " + (dir / "ref.json").string() +
+                      " " + kScene).code, 0);
+  const CliRun r = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() +
+                             " -q --integrate-only --memory-limit 2M --stats " + (dir / "i.json").string() + " " + kScene);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("extract with: scalefuse resume"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_EQ(json_of(scalefuse("status " + job.string() + " --json").output)["stage"], "integrated");
+  // The voxels per level, counted brick by brick from the tiles, are those the full run fused.
+  const auto a = nlohmann::json::parse(bytes_of(dir / "ref.json")), b = nlohmann::json::parse(bytes_of(dir / "i.json"));
+  ASSERT_EQ(a["levels"].size(), b["levels"].size());
+  for (std::size_t l = 0; l < a["levels"].size(); ++l)
+    EXPECT_EQ(a["levels"][l]["voxels_fused"], b["levels"][l]["voxels_fused"]) << "level " << a["levels"][l]["level"];
+  ASSERT_EQ(scalefuse("resume " + job.string() + " -q").code, 0);
+  EXPECT_TRUE(bytes_of(out) == bytes_of(ref));
+}
+
 }  // namespace sf

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include "engine/fusion.h"
 #include "engine/triangulate.h"
 
 namespace sf {
@@ -19,6 +20,21 @@ TEST(Equation1, LevelIsCeilOfLog2OfRootOverFootprint) {
   // Footprint larger than the root: level 0; tiny footprint: clamped to the deepest level.
   EXPECT_EQ(triangle_level(1.0, 1.0, 5.0, 18), 0);
   EXPECT_EQ(triangle_level(1.0, 1.0, 1e-9, 18), 18);
+}
+
+TEST(BrickLevel, AutoIsTheFinestLevelMinus8Clamped) {
+  const RootCube root{Eigen::Vector3d::Zero(), 1.6};
+  IntegrateOptions o;  // lambda 1
+  // 1.6 / 1 mm = 1600 -> log2 10.64 -> level 11 -> bricks of level 3.
+  EXPECT_EQ(auto_brick_level(root, 1e-3, o), 3);
+  // 1.6 / 0.1 mm = 16000 -> log2 13.97 -> level 14 -> 6.
+  EXPECT_EQ(auto_brick_level(root, 1e-4, o), 6);
+  // Coarse data clamps at 3; the deepest data at 10 (level 18 - 8).
+  EXPECT_EQ(auto_brick_level(root, 0.1, o), 3);
+  EXPECT_EQ(auto_brick_level(root, 1e-9, o), 10);
+  // A single-level baseline bricks by its level.
+  o.single_level = 12;
+  EXPECT_EQ(auto_brick_level(root, 1e-3, o), 4);
 }
 
 TEST(Ramp, GammaTimesCellSize) {

@@ -2,6 +2,7 @@
 
 #include <thread>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "engine/error.h"
 
@@ -82,13 +83,12 @@ std::size_t FollowSource::rescan() {
     if (it == index_of.end()) throw input_error(n, "depth map disappeared from the input while it was being followed");
     indices.push_back(it->second);
   }
-  std::unordered_map<std::string, bool> taken;
-  for (const std::string& n : names) taken[n] = true;
+  std::unordered_set<std::string> taken(names.begin(), names.end());
   const std::size_t before = names.size();
   auto accept = [&](const std::string& n, std::size_t i) {
     names.push_back(n);
     indices.push_back(i);
-    taken[n] = true;
+    taken.insert(n);
     pending_.erase(n);
   };
   // The job's own depth maps first, in its order.

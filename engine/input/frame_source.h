@@ -3,7 +3,6 @@
 // never holds more than the frames in flight. Formats: see docs/formats.md.
 #include <cstddef>
 #include <filesystem>
-#include <functional>
 #include <memory>
 #include <string>
 #include <vector>

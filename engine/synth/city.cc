@@ -142,6 +142,7 @@ SyntheticScene render_city(const std::vector<Mesh>& props, const CityOptions& o,
   }
   // Street: each statue from eye height, on an arc facing the plaza (+z), 150 degrees wide; a
   // statue's views are consecutive, as a photographer walking round it takes them.
+  std::vector<std::size_t> statue_of_view(views.size(), statues.size());  // statues.size(): not a street view
   for (int k = 0, i = 0; k < o.props; ++k) {
     const int per = o.street_views / o.props + (k < o.street_views % o.props ? 1 : 0);
     const Statue& s = statues[std::size_t(k)];
@@ -151,12 +152,9 @@ SyntheticScene render_city(const std::vector<Mesh>& props, const CityOptions& o,
       const Eigen::Vector3d eye =
           s.base + Eigen::Vector3d(d * std::sin(a), 1.6 - kPlinthHeight + 0.4 * unit(rng), d * std::cos(a));
       add_view("street", i, true, Eigen::Vector3d(eye.x(), std::max(eye.y(), 1.2), eye.z()), s.centre());
+      statue_of_view.push_back(std::size_t(k));
     }
   }
-  std::vector<std::size_t> statue_of_street_view;
-  for (int k = 0; k < o.props; ++k)
-    for (int j = 0; j < o.street_views / o.props + (k < o.street_views % o.props ? 1 : 0); ++j)
-      statue_of_street_view.push_back(std::size_t(k));
   render_views(city, views, progress);
   for (const SynthView& v : views)
     if (v.valid_pixels == 0) throw InputError("synth --city: view " + v.name + " sees no surface");
@@ -167,8 +165,8 @@ SyntheticScene render_city(const std::vector<Mesh>& props, const CityOptions& o,
     const SynthView& v = views[i];
     const double fv = std::sqrt(v.sensor.fx * v.sensor.fy);
     if (v.name.rfind("far_", 0) == 0) far_fp.push_back(v.median_footprint);
-    if (v.name.rfind("street_", 0) != 0) continue;
-    const Statue& s = statues[statue_of_street_view[std::stoul(v.name.substr(7))]];
+    if (statue_of_view[i] == statues.size()) continue;
+    const Statue& s = statues[statue_of_view[i]];
     const double z_max = (v.sensor.R * s.centre() + v.sensor.t).z() + s.radius;
     for (std::size_t p = 0; p < v.depth.size(); p += 7)  // a 1/7 subsample is plenty for a median
       if (v.depth[p] > 0 && v.depth[p] <= z_max) street_fp.push_back(v.depth[p] / fv);
