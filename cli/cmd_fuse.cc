@@ -69,6 +69,11 @@ nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
   j["depth_maps"] = s.depth_maps;
   j["resumed_at"] = s.resumed_at;
   j["brick_level"] = s.brick_level;
+  j["tiles"] = s.tiles;
+  j["sweep_steps"] = s.sweep_steps;
+  j["frame_reads"] = s.frame_reads;
+  j["plan_estimate_bytes"] = s.plan_estimate_bytes;
+  j["field_bytes"] = s.field_bytes;
   j["samples"] = s.samples;
   j["samples_outside_root"] = s.samples_outside_root;
   j["triangles_in"] = s.triangles;
@@ -318,7 +323,7 @@ void run_fuse(const FuseArgs& a) {
 void add_job_options(CLI::App* cmd, FuseArgs& args) {
   cmd->add_option("--threads", args.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--memory-limit", args.memory_limit, "memory for bricks, e.g. 1.5G (default: a quarter of RAM)");
-  cmd->add_option("--checkpoint-every", args.checkpoint_every, "checkpoint after this many depth maps (default 50)")
+  cmd->add_option("--checkpoint-every", args.checkpoint_every, "checkpoint after this many integration steps: depth maps x tiles they reach (default 50)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--checkpoint-seconds", args.checkpoint_seconds, "checkpoint at least this often (default 300 s)")
       ->check(CLI::PositiveNumber);

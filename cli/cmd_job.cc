@@ -39,7 +39,8 @@ void run_status(const std::string& dir, bool json) {
                         {"output", st.output},         {"depth_maps", st.depth_maps},
                         {"integrated", st.integrated}, {"bricks", st.bricks},
                         {"tile_bytes", st.tile_bytes}, {"journal_bytes", st.journal_bytes},
-                        {"last_checkpoint", st.last_checkpoint}};
+                        {"last_checkpoint", st.last_checkpoint},
+                        {"sweep", {{"tiles", st.sweep_tiles}, {"tile", st.sweep_tile}, {"steps", st.sweep_steps}}}};
     std::printf("%s\n", j.dump(2).c_str());
     return;
   }
@@ -52,6 +53,9 @@ void run_status(const std::string& dir, bool json) {
   std::printf("output       %s\n", st.output.c_str());
   std::printf("depth maps   %zu of %zu integrated (at the last checkpoint%s%s)\n", st.integrated, st.depth_maps,
               st.last_checkpoint.empty() ? "" : ", ", st.last_checkpoint.c_str());
+  if (st.sweep_tiles > 1)
+    std::printf("sweep        in tile %zu of %zu, %zu steps (depth map x tile) done\n", st.sweep_tile + 1, st.sweep_tiles,
+                st.sweep_steps);
   std::printf("bricks       %zu\n", st.bricks);
   std::printf("on disk      %.1f MiB of tiles, %.1f MiB of journal\n", double(st.tile_bytes) / (1 << 20),
               double(st.journal_bytes) / (1 << 20));

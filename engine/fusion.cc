@@ -15,6 +15,7 @@
 
 #include "engine/error.h"
 #include "engine/hsdf_math.h"
+#include "scheduler/tile_plan.h"
 
 namespace sf {
 
@@ -193,8 +194,10 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   const Eigen::AlignedBox3d root_box(root.min, root.min + Eigen::Vector3d::Constant(root.size));
   end_stage("bounds");
 
-  // Pass 2: stream the depth maps through read -> triangulate (parallel) -> integrate (in order),
-  // in rounds: one over the depth maps present, then (following) one per growth of the source.
+  // Pass 2: integration in sweeps (scheduler/tile_plan.h): one over the depth maps present, then
+  // (following) one per growth of the source. A sweep plans tiles whose fields fit the memory
+  // budget, then streams each tile's depth maps through read -> triangulate (parallel) ->
+  // integrate into the tile's bricks (in order).
   std::optional<int> job_brick_level = journal ? journal->fixed_brick_level() : std::nullopt;
   const int brick_level = job_brick_level                      ? *job_brick_level
                           : options.octree.brick_level >= 0    ? options.octree.brick_level
@@ -202,16 +205,35 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
                                                                : 4;
   stats.brick_level = brick_level;
   BrickMap map(brick_level);
-  const std::size_t first = journal ? journal->begin(identities, root, map) : 0;
-  if (first > frames.size()) throw std::logic_error("journal reports more depth maps than the input has");
-  stats.resumed_at = first;
+  IntegrationProgress progress = journal ? journal->begin(identities, root, map) : IntegrationProgress{};
+  if (progress.sweep_end > frames.size()) throw std::logic_error("journal reports more depth maps than the input has");
+  stats.resumed_at = progress.integrated + progress.steps;
+  const std::size_t initial_frames = frames.size();
+  std::size_t outside = 0, late_samples = 0;
+  std::atomic<std::size_t> reads{0};
+  // A depth map as integration sees it: clipped to the box, and (arrived while following) to the
+  // root cube fixed at the start.
+  struct LateSamples {
+    std::size_t outside = 0, kept = 0;
+  };
+  auto load_frame = [&](std::size_t i, LateSamples* late) {
+    DepthFrame f = source.load(frames[i]);
+    ++reads;
+    clip_to_box(f, clip);
+    if (i >= initial_frames) {
+      const std::size_t before = f.valid_count();
+      clip_to_box(f, root_box);
+      late->kept = f.valid_count();
+      late->outside = before - late->kept;
+    }
+    return f;
+  };
   struct Item {
     std::size_t index = 0;
     DepthFrame frame;
     std::vector<FrameTriangle> triangles;
+    LateSamples late;
   };
-  std::size_t next = first, done = first;
-  std::atomic<std::size_t> outside{0}, late_samples{0};
   std::size_t item_bytes_max = 0;  // the largest depth map in flight so far (serial stage only)
   auto item_bytes = [](const Item& item) {
     return item.frame.memory_bytes() + item.triangles.capacity() * sizeof(FrameTriangle);
@@ -219,67 +241,153 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   IntegrateStats integ;
   const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
   const std::atomic<bool>* stop = hooks.follow ? nullptr : hooks.stop;
-  const std::size_t initial_frames = frames.size();
+  bool stopped = false;
   for (;;) {
-    tbb::parallel_pipeline(
-        tokens,
-        tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
-                                                      [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
-                                                        if (next >= frames.size() || (stop && stop->load())) {
-                                                          fc.stop();
-                                                          return nullptr;
-                                                        }
-                                                        auto item = std::make_shared<Item>();
-                                                        item->index = next++;
-                                                        return item;
-                                                      }) &
-            tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
-                tbb::filter_mode::parallel,
-                [&](std::shared_ptr<Item> item) {
-                  item->frame = source.load(frames[item->index]);
-                  clip_to_box(item->frame, clip);
-                  if (item->index >= initial_frames) {  // arrived while following
-                    const std::size_t before = item->frame.valid_count();
-                    clip_to_box(item->frame, root_box);
-                    const std::size_t after = item->frame.valid_count();
-                    outside += before - after;
-                    late_samples += after;
+    // A sweep: the one under way in the job, else one over every depth map not yet integrated.
+    const std::size_t from = progress.integrated, to = progress.sweeping() ? progress.sweep_end : frames.size();
+    if (from < to) {
+      // Which depth maps reach which tile. Without a tile store (no job) the whole field is one tile.
+      std::vector<std::vector<std::size_t>> tile_frames;
+      std::vector<char> counted(to - from, 0);  // triangles counted once per depth map
+      if (!map.spills()) {
+        progress.tiles = {BrickBox::whole(brick_level)};
+        tile_frames.resize(1);
+        for (std::size_t i = from; i < to; ++i) tile_frames[0].push_back(i);
+      } else {
+        std::vector<std::vector<std::uint64_t>> reach_bricks(to - from);
+        std::vector<VoxelKey> cells;
+        std::mutex cells_mutex;
+        tbb::parallel_for(from, to, [&](std::size_t i) {
+          LateSamples late;
+          const DepthFrame f = load_frame(i, &late);
+          FrameReach r = frame_reach(f, triangulate(f, options.triangulate), root, options.integrate, brick_level);
+          reach_bricks[i - from] = std::move(r.bricks);
+          std::lock_guard lock(cells_mutex);
+          cells.insert(cells.end(), r.cells.begin(), r.cells.end());
+          report(hooks.progress, "plan", double(reads.load()), double(to - from));
+        });
+        if (!progress.sweeping()) {
+          std::sort(cells.begin(), cells.end());
+          cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+          std::vector<std::uint64_t> touched;
+          for (const auto& b : reach_bricks) touched.insert(touched.end(), b.begin(), b.end());
+          std::sort(touched.begin(), touched.end());
+          touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+          // 70% of the limit per tile: the estimate is within about 25% on the scenes measured, and
+          // the depth maps in flight need room (the cache spills if a tile outgrows it anyway).
+          const auto estimate = estimate_brick_bytes(cells, brick_level, options.integrate, map.field_bytes(), touched);
+          stats.plan_estimate_bytes = 0;
+          for (const auto& e : estimate) stats.plan_estimate_bytes += e.second;
+          progress.tiles = cut_tiles(estimate, brick_level, 0.7 * double(map.memory_limit()));
+          progress.sweep_end = to;
+          progress.tile = progress.tile_frames = progress.steps = 0;
+        }
+        tile_frames.resize(progress.tiles.size());
+        std::vector<char> reaches(progress.tiles.size());
+        for (std::size_t i = from; i < to; ++i) {
+          std::fill(reaches.begin(), reaches.end(), 0);
+          for (std::uint64_t id : reach_bricks[i - from]) {
+            const BrickCoord c{std::uint32_t(id & 0x1fffff), std::uint32_t((id >> 21) & 0x1fffff), std::uint32_t(id >> 42)};
+            const std::size_t t = tile_of(progress.tiles, c);
+            if (t == progress.tiles.size()) throw std::logic_error("a brick a depth map reaches lies in no tile of the plan");
+            reaches[t] = 1;
+          }
+          for (std::size_t t = 0; t < progress.tiles.size(); ++t)
+            if (reaches[t]) tile_frames[t].push_back(i);
+        }
+      }
+      progress.sweep_end = to;
+      stats.tiles = progress.tiles.size();
+      std::size_t total_steps = 0;
+      for (const auto& list : tile_frames) total_steps += list.size();
+      const bool one_tile = progress.tiles.size() == 1;
+      for (; progress.tile < progress.tiles.size() && !stopped; ++progress.tile, progress.tile_frames = 0) {
+        const std::vector<std::size_t>& list = tile_frames[progress.tile];
+        const BrickBox* region = one_tile ? nullptr : &progress.tiles[progress.tile];
+        std::size_t next = progress.tile_frames;
+        tbb::parallel_pipeline(
+            tokens,
+            tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
+                                                          [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
+                                                            if (next >= list.size() || (stop && stop->load())) {
+                                                              fc.stop();
+                                                              return nullptr;
+                                                            }
+                                                            auto item = std::make_shared<Item>();
+                                                            item->index = list[next++];
+                                                            return item;
+                                                          }) &
+                tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
+                    tbb::filter_mode::parallel,
+                    [&](std::shared_ptr<Item> item) {
+                      item->frame = load_frame(item->index, &item->late);
+                      item->triangles = triangulate(item->frame, options.triangulate);
+                      return item;
+                    }) &
+                tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
+                  // Depth maps enter the field strictly in index order (equations 2-3 are
+                  // order-sensitive in floating point).
+                  map.next_epoch();
+                  // The memory limit covers the depth maps in flight too: each holds a frame and its
+                  // triangles, and integration builds tables about as large again for the one it runs.
+                  item_bytes_max = std::max(item_bytes_max, item_bytes(*item));
+                  map.set_reserve((tokens + 1) * item_bytes_max);
+                  IntegrateStats s = integrate_frame(item->frame, item->triangles, root, options.integrate, map, region);
+                  char& first_time = counted[item->index - from];
+                  if (first_time == 0) {
+                    outside += item->late.outside;
+                    late_samples += item->late.kept;
+                  } else {
+                    s.triangles = 0;
+                    std::fill(std::begin(s.triangles_per_level), std::end(s.triangles_per_level), 0);
                   }
-                  item->triangles = triangulate(item->frame, options.triangulate);
-                  return item;
-                }) &
-            tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
-              // Depth maps enter the field strictly in index order (equations 2-3 are order-sensitive
-              // in floating point).
-              map.next_epoch();
-              // The memory limit covers the depth maps in flight too: each holds a frame and its
-              // triangles, and integration builds tables about as large again for the one it runs.
-              item_bytes_max = std::max(item_bytes_max, item_bytes(*item));
-              map.set_reserve((tokens + 1) * item_bytes_max);
-              integ.add(integrate_frame(item->frame, item->triangles, root, options.integrate, map));
-              ++done;
-              if (journal) journal->frame_done(done, map);
-              report(hooks.progress, "integrate", double(done), double(frames.size()));
-            }));
-    if (done < frames.size()) {  // stopped
-      if (journal) journal->interrupted(done, map);
-      throw Interrupted(done, frames.size());
+                  first_time = 1;
+                  integ.add(s);
+                  ++progress.tile_frames;
+                  ++progress.steps;
+                  ++stats.sweep_steps;
+                  if (journal) journal->step_done(progress, map);
+                  report(hooks.progress, "integrate", double(progress.steps), double(total_steps));
+                }));
+        if (progress.tile_frames < list.size()) {
+          stopped = true;
+          break;
+        }
+        // The tile is complete; no later tile of the sweep touches its bricks.
+        if (map.spills() && !one_tile) map.spill_all();
+      }
+      if (stopped) break;
+      progress.integrated = to;
+      progress.tiles.clear();
+      progress.tile = progress.tile_frames = progress.steps = 0;
+      continue;  // a sweep recorded by the job may end before the input does
     }
     if (!hooks.follow || !hooks.follow->wait_for_more(source.size())) break;
-    const std::size_t from = frames.size();
+    const std::size_t grown_from = frames.size();
     take_new_frames();
     if (journal) {
       identities.resize(frames.size());
-      tbb::parallel_for(from, frames.size(), [&](std::size_t i) {
+      tbb::parallel_for(grown_from, frames.size(), [&](std::size_t i) {
         identities[i] = identity_of(source, frames[i], source.load(frames[i]));
       });
-      journal->inputs_added(identities, from);
+      journal->inputs_added(identities, grown_from);
     }
   }
+  if (stopped) {
+    if (journal) journal->interrupted(progress, map);
+    if (progress.tiles.size() == 1)
+      throw Interrupted("interrupted after " + std::to_string(progress.whole_frames()) + " of " +
+                        std::to_string(frames.size()) + " depth maps");
+    throw Interrupted("interrupted in tile " + std::to_string(progress.tile + 1) + " of " +
+                      std::to_string(progress.tiles.size()) + " (" + std::to_string(progress.integrated) + " of " +
+                      std::to_string(frames.size()) + " depth maps in every tile)");
+  }
+  stats.frame_reads = reads.load();
+  for (const auto& [c, bytes] : map.field_bytes()) stats.field_bytes += bytes;
   stats.depth_maps = frames.size();
-  stats.samples += late_samples.load();
-  stats.samples_outside_root = outside.load();
-  if (journal) journal->integrated(map);
+  stats.samples += late_samples;
+  stats.samples_outside_root = outside;
+  if (journal) journal->integrated(progress, map);
   stats.peak_rss_integrate_bytes = peak_rss_bytes();
   stats.spill = map.spill_stats();
   stats.triangles = integ.triangles;

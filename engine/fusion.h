@@ -53,7 +53,12 @@ struct FusionStats {
   std::string format;
   std::size_t depth_maps = 0, samples = 0, triangles = 0, contributions = 0;
   std::size_t samples_outside_root = 0;  // fuse --follow: samples of later depth maps outside the root cube
-  std::size_t resumed_at = 0;  // depth maps already integrated by an earlier run of the job
+  std::size_t resumed_at = 0;  // depth maps (+ sweep steps) already integrated by an earlier run of the job
+  std::size_t tiles = 0;       // tiles of the last sweep (1: the whole field at once)
+  std::size_t sweep_steps = 0; // (tile, depth map) integrations of this run
+  std::size_t frame_reads = 0; // depth maps read for integration (once per tile they reach) and planning
+  double plan_estimate_bytes = 0;  // the plan's estimate of the field's memory (last sweep)
+  std::size_t field_bytes = 0;     // the field's memory when integrated (bricks measured when resident)
   int brick_level = 0;         // the one used (octree.brick_level, or chosen by auto)
   RootCube root;
   std::array<std::size_t, kMaxLevel + 1> voxels_fused{};        // after integration
@@ -86,13 +91,25 @@ struct FusionHooks {
   bool stop_after_integration = false;
 };
 
-// fuse() was stopped through FusionHooks::stop; the journal holds a checkpoint of `done` maps.
+// fuse() was stopped through FusionHooks::stop; the journal holds a checkpoint.
 class Interrupted : public std::runtime_error {
  public:
-  Interrupted(std::size_t done, std::size_t total)
-      : std::runtime_error("interrupted after " + std::to_string(done) + " of " + std::to_string(total) + " depth maps"),
-        done(done), total(total) {}
-  std::size_t done, total;
+  using std::runtime_error::runtime_error;
+};
+
+// Where an integration stands. Depth maps [0, integrated) are in every brick. A sweep over depth
+// maps [integrated, sweep_end) runs tile by tile (scheduler/tile_plan.h): tiles [0, tile) hold
+// them, tile `tile` holds the first `tile_frames` of those that reach it; `steps` counts the
+// (tile, depth map) integrations of the sweep done so far.
+struct IntegrationProgress {
+  std::size_t integrated = 0;
+  std::size_t sweep_end = 0;  // == integrated: no sweep under way
+  std::vector<BrickBox> tiles;
+  std::size_t tile = 0, tile_frames = 0, steps = 0;
+  bool sweeping() const { return sweep_end > integrated; }
+  // Depth maps every brick holds, counting the sweep's when it has one tile (then steps are
+  // depth maps).
+  std::size_t whole_frames() const { return integrated + (tiles.size() == 1 ? steps : 0); }
 };
 
 // What a job remembers of one depth map, to notice changed inputs on resume.
@@ -103,8 +120,8 @@ struct FrameIdentity {
 };
 
 // A journal of the integration that makes it resumable (implemented by scheduler/job: the job
-// directory). fuse() calls it in this order: begin, frame_done after each depth map (in input
-// order, between depth maps: no other access to the map runs), integrated.
+// directory). fuse() calls it in this order: begin, step_done after each (tile, depth map)
+// integration (between them: no other access to the map runs), integrated.
 class FusionJournal {
  public:
   virtual ~FusionJournal() = default;
@@ -113,18 +130,17 @@ class FusionJournal {
   virtual std::optional<RootCube> fixed_root() const = 0;
   // The brick level of an existing job (its tiles are cut that way); nullopt for a new job.
   virtual std::optional<int> fixed_brick_level() const { return std::nullopt; }
-  // Returns how many depth maps (a prefix, in input order) the map already holds after restoring
-  // it from the last checkpoint; 0 for a new job. Throws InputError if the job was started on
-  // other inputs or another configuration.
-  virtual std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) = 0;
+  // Restores the map from the last checkpoint and returns where it stands (all zero for a new
+  // job). Throws InputError if the job was started on other inputs or another configuration.
+  virtual IntegrationProgress begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) = 0;
   // The source grew (fuse --follow): depth maps [from, frames.size()) are new; record them.
   virtual void inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) = 0;
-  // `done` depth maps are integrated; may spill bricks and commit a checkpoint.
-  virtual void frame_done(std::size_t done, BrickMap& map) = 0;
+  // One more step is done; may spill bricks and commit a checkpoint of `progress`.
+  virtual void step_done(const IntegrationProgress& progress, BrickMap& map) = 0;
   // Integration is complete: the final checkpoint.
-  virtual void integrated(BrickMap& map) = 0;
-  // Integration stopped early (FusionHooks::stop) after `done` depth maps: a checkpoint.
-  virtual void interrupted(std::size_t done, BrickMap& map) = 0;
+  virtual void integrated(const IntegrationProgress& progress, BrickMap& map) = 0;
+  // Integration stopped early (FusionHooks::stop): a checkpoint.
+  virtual void interrupted(const IntegrationProgress& progress, BrickMap& map) = 0;
 };
 
 // Runs the fusion in the calling TBB arena. Throws InputError on bad input. With a journal the

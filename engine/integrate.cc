@@ -237,7 +237,19 @@ void triangle_contributions(const DepthFrame& frame, const FrameTriangle& tri, i
 }
 
 IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
-                                      const RootCube& root, const IntegrateOptions& options, BrickMap& map) {
+                                      const RootCube& root, const IntegrateOptions& options, BrickMap& map,
+                                      const BrickBox* region) {
+  const int brick_level = map.brick_level();
+  auto outside = [&](const Contribution& c) { return !region->contains(brick_of(c.key, brick_level)); };
+  // The region in world coordinates, widened a little: a triangle reaches only voxels within a
+  // ramp of it, so one whose box widened by its ramp misses this is skipped.
+  Eigen::AlignedBox3d region_box;
+  if (region) {
+    const double bs = root.cell_size(brick_level), pad = 1e-6 * bs;
+    const Eigen::Vector3d lo(region->lo.x, region->lo.y, region->lo.z), hi(region->hi.x, region->hi.y, region->hi.z);
+    region_box = Eigen::AlignedBox3d(root.min + lo * bs - Eigen::Vector3d::Constant(pad),
+                                     root.min + hi * bs + Eigen::Vector3d::Constant(pad));
+  }
   IntegrateStats total;
   std::mutex stats_mutex;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 2048), [&](const tbb::blocked_range<std::size_t>& r) {
@@ -248,10 +260,19 @@ IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector
       const FrameTriangle& tri = triangles[t];
       int lt = 0, coarsest = 0;
       if (!insertion_levels(frame, tri.data(), root, options, &lt, &coarsest)) continue;
+      if (region) {
+        Eigen::AlignedBox3d box;
+        for (std::uint32_t i : tri) box.extend(frame.position[i].cast<double>());
+        const double ramp = insertion_ramp(options, root, coarsest, lt);
+        box.min().array() -= ramp;
+        box.max().array() += ramp;
+        if (!box.intersects(region_box)) continue;
+      }
       const std::size_t before = batch.size();
       const PreparedTriangle T = prepare(frame, tri);
       if (T.ok)
         for (int l = lt; l >= coarsest; --l) contributions_at_level(frame, T, l, lt, root, options, batch);
+      if (region) batch.erase(std::remove_if(batch.begin() + std::ptrdiff_t(before), batch.end(), outside), batch.end());
       ++local.triangles;
       ++local.triangles_per_level[lt];
       local.contributions += batch.size() - before;
@@ -268,10 +289,11 @@ IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector
 }
 
 IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
-                               const RootCube& root, const IntegrateOptions& options, BrickMap& map) {
+                               const RootCube& root, const IntegrateOptions& options, BrickMap& map,
+                               const BrickBox* region) {
   IntegrateStats stats;
-  if (integrate_frame_projective(frame, triangles, root, options, map, &stats)) return stats;
-  return integrate_frame_prisms(frame, triangles, root, options, map);
+  if (integrate_frame_projective(frame, triangles, root, options, map, &stats, region)) return stats;
+  return integrate_frame_prisms(frame, triangles, root, options, map, region);
 }
 
 }  // namespace sf

@@ -52,21 +52,36 @@ struct IntegrateStats {
 // Integrates one depth map into `map`. Runs parallel (tbb::parallel_for) in the calling arena.
 // Uses the voxel-centric enumeration when the frame allows it (a perspective pixel grid), else
 // the prism enumeration; both give the same field.
+// With `region`, only voxels of the region's bricks are written (the field of a plan tile; the
+// voxels outside get nothing, those inside exactly what the whole frame gives them).
 IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
-                               const RootCube& root, const IntegrateOptions& options, BrickMap& map);
+                               const RootCube& root, const IntegrateOptions& options, BrickMap& map,
+                               const BrickBox* region = nullptr);
 
 // The two enumerations, exposed for tests and benchmarks.
 // Prisms: per triangle and level, the voxels of the truncated prism its lines of sight sweep
 // (any sensor, any triangulation).
 IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
-                                      const RootCube& root, const IntegrateOptions& options, BrickMap& map);
+                                      const RootCube& root, const IntegrateOptions& options, BrickMap& map,
+                                      const BrickBox* region = nullptr);
 // Voxel-centric: per image tile and level, every voxel of the tile's frustum slab is projected
 // into the image and looked up in the pixel grid (perspective frames whose samples sit at pixel
 // centres and whose triangles each span one pixel quad). Returns false, touching nothing, when the
 // frame does not qualify.
 bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
                                 const RootCube& root, const IntegrateOptions& options, BrickMap& map,
-                                IntegrateStats* stats);
+                                IntegrateStats* stats, const BrickBox* region = nullptr);
+
+// Where a depth map can write, for planning (scheduler/tile_plan.h): every brick that any voxel
+// it integrates can lie in (a superset: integrate_frame writes nothing elsewhere), and its surface
+// cells, for estimating the field's size where depth maps overlap: per inserted level l, the
+// level-(l - 3) cells its triangles cross, as the key of their first level-l voxel.
+struct FrameReach {
+  std::vector<std::uint64_t> bricks;  // BrickCoord::packed(), sorted, unique
+  std::vector<VoxelKey> cells;        // sorted, unique
+};
+FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles, const RootCube& root,
+                       const IntegrateOptions& options, int brick_level);
 
 // The contributions one triangle makes at one level (exposed for tests). `level_of_triangle` is
 // the level of equation 1, used to bound coarser-level ramps.

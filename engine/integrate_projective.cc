@@ -91,17 +91,30 @@ bool is_pixel_centre(const DepthFrame& f, std::uint32_t i) {
   return p.x() == float(i % w) + 0.5f && p.y() == float(i / w) + 0.5f;
 }
 
-}  // namespace
+// A perspective depth map prepared for voxel-centric insertion: its pixel quads, triangles, and
+// per (tile, level) the bounds of the prisms inserted there.
+struct Prepared {
+  const DepthFrame* frame = nullptr;
+  int W = 0, QW = 0, QH = 0, TX = 0, TY = 0;
+  std::vector<Quad> quad;
+  std::vector<GridTriangle> tris;
+  std::vector<TileLevel> tile_levels;  // [tile * L + level]
+  std::vector<Vector3d> tile_normal;
+  IntegrateStats stats;  // triangles inserted, per level
+};
+constexpr int L = kMaxLevel + 1;
 
-bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
-                                const RootCube& root, const IntegrateOptions& options, BrickMap& map,
-                                IntegrateStats* stats_out) {
+// Pixel quad -> its triangles (two slots); false if any triangle is not within one quad, or any
+// sample is off its pixel centre (the frame then goes to the prism path).
+bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles, const RootCube& root,
+             const IntegrateOptions& options, Prepared* out) {
   const Sensor& sensor = frame.sensor;
   if (sensor.kind != Sensor::Kind::Perspective || frame.width < 2 || frame.height < 2) return false;
-  const int W = frame.width, QW = frame.width - 1, QH = frame.height - 1;
-  // Pixel quad -> its triangles (two slots). Any triangle not within one quad, or any sample off
-  // its pixel centre, sends the frame to the prism path.
-  std::vector<Quad> quad(std::size_t(QW) * std::size_t(QH));
+  Prepared& p = *out;
+  p.frame = &frame;
+  p.W = frame.width, p.QW = frame.width - 1, p.QH = frame.height - 1;
+  const int W = p.W, QW = p.QW, QH = p.QH;
+  p.quad.assign(std::size_t(QW) * std::size_t(QH), Quad{});
   for (std::size_t t = 0; t < triangles.size(); ++t) {
     const FrameTriangle& tri = triangles[t];
     int r0 = frame.height, c0 = W, r1 = -1, c1 = -1;
@@ -111,7 +124,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
       r0 = std::min(r0, r), r1 = std::max(r1, r), c0 = std::min(c0, c), c1 = std::max(c1, c);
     }
     if (r1 - r0 > 1 || c1 - c0 > 1 || r0 >= QH || c0 >= QW) return false;
-    Quad& qd = quad[std::size_t(r0) * QW + c0];
+    Quad& qd = p.quad[std::size_t(r0) * QW + c0];
     if (qd.tri[0] < 0) {
       qd.tri[0] = std::int32_t(t);
     } else if (qd.tri[1] < 0) {
@@ -130,8 +143,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
     }
   }
 
-  IntegrateStats stats;
-  std::vector<GridTriangle> tris(triangles.size());
+  p.tris.assign(triangles.size(), GridTriangle{});
+  std::vector<GridTriangle>& tris = p.tris;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t t = r.begin(); t != r.end(); ++t) {
       GridTriangle& g = tris[t];
@@ -151,20 +164,20 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   });
   for (const GridTriangle& g : tris)
     if (g.level >= 0) {
-      ++stats.triangles;
-      ++stats.triangles_per_level[g.level];
+      ++p.stats.triangles;
+      ++p.stats.triangles_per_level[g.level];
     }
 
   // Per tile and level: bounds of the prisms of the triangles inserted there.
-  const int TX = (QW + kTile - 1) / kTile, TY = (QH + kTile - 1) / kTile;
-  constexpr int L = kMaxLevel + 1;
-  std::vector<TileLevel> tile_levels(std::size_t(TX) * TY * L);
-  std::vector<Vector3d> tile_normal(std::size_t(TX) * TY);
+  p.TX = (QW + kTile - 1) / kTile, p.TY = (QH + kTile - 1) / kTile;
+  const int TX = p.TX, TY = p.TY;
+  p.tile_levels.assign(std::size_t(TX) * TY * L, TileLevel{});
+  p.tile_normal.assign(std::size_t(TX) * TY, Vector3d::Zero());
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
   tbb::parallel_for(0, TX * TY, [&](int tile) {
     const int tx = tile % TX, ty = tile / TX;
-    TileLevel* tl = &tile_levels[std::size_t(tile) * L];
+    TileLevel* tl = &p.tile_levels[std::size_t(tile) * L];
     // The quads of the tile, plus the column to its left and the row above: a voxel on the
     // tile's left or top border may belong to a triangle there (see the owner lookup below).
     const int qr0 = std::max(0, ty * kTile - 1), qr1 = std::min(QH, (ty + 1) * kTile);
@@ -172,14 +185,14 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
     auto for_each_triangle = [&](auto&& f) {
       for (int r = qr0; r < qr1; ++r)
         for (int c = qc0; c < qc1; ++c)
-          for (std::int32_t t : quad[std::size_t(r) * QW + c].tri)
+          for (std::int32_t t : p.quad[std::size_t(r) * QW + c].tri)
             if (t >= 0 && tris[t].ok) f(tris[t]);
     };
     Vector3d n = Vector3d::Zero();
     for_each_triangle([&](const GridTriangle& g) { n += g.normal; });
     if (!(n.norm() > 1e-6)) n = Vector3d::UnitZ();  // any direction is a valid bound
     n.normalize();
-    tile_normal[tile] = n;
+    p.tile_normal[tile] = n;
     for_each_triangle([&](const GridTriangle& g) {
       double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin;
       double s[3], sd[3];  // offset along n of each vertex and of its line of sight
@@ -204,6 +217,93 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
       }
     });
   });
+  return true;
+}
+
+// The candidate voxels of one (tile, level) item: the tile's frustum slab as half-spaces, the
+// index box that bounds it (per world axis), and the axis the columns march along.
+struct ItemFrustum {
+  HalfSpace planes[8];
+  std::int64_t first[3], last[3];
+  int ax = 0, bx = 1, cx = 2;
+  int c0 = 0, c1 = 0, r0 = 0, r1 = 0;  // the tile's pixel quads [c0, c1) x [r0, r1)
+  bool empty() const { return first[0] > last[0] || first[1] > last[1] || first[2] > last[2]; }
+  void clip(const BrickBox& box, int level, int brick_level) {
+    for (int a = 0; a < 3; ++a) {
+      std::int64_t f, l;
+      box.voxel_range(level, brick_level, a, &f, &l);
+      first[a] = std::max(first[a], f);
+      last[a] = std::min(last[a], l);
+    }
+  }
+};
+
+ItemFrustum item_frustum(const Prepared& p, const RootCube& root, int tile, int level) {
+  const Sensor& sensor = p.frame->sensor;
+  const Eigen::Matrix3d Rt = sensor.R.transpose();
+  ItemFrustum fr;
+  const int tx = tile % p.TX, ty = tile / p.TX;
+  fr.c0 = tx * kTile, fr.c1 = std::min(p.QW, fr.c0 + kTile), fr.r0 = ty * kTile, fr.r1 = std::min(p.QH, fr.r0 + kTile);
+  const TileLevel& tl = p.tile_levels[std::size_t(tile) * L + level];
+  const double h = root.cell_size(level);
+  const double margin = 1e-3 * h;
+  // The tile's frustum slab as half-spaces a . x_cam + b >= 0, moved to world coordinates.
+  const double pm = 1e-3;  // pixels
+  const double u0 = fr.c0 + 0.5 - pm, u1 = fr.c1 + 0.5 + pm, v0 = fr.r0 + 0.5 - pm, v1 = fr.r1 + 0.5 + pm;
+  const double zlo = std::max(tl.zmin - tl.ramp - margin, 1e-9), zhi = tl.zmax + tl.ramp + margin;
+  const Vector3d a_cam[6] = {{sensor.fx, 0, sensor.cx - u0}, {-sensor.fx, 0, u1 - sensor.cx},
+                             {0, sensor.fy, sensor.cy - v0}, {0, -sensor.fy, v1 - sensor.cy},
+                             {0, 0, 1},                      {0, 0, -1}};
+  const double b_cam[6] = {0, 0, 0, 0, -zlo, zhi};
+  for (int k = 0; k < 6; ++k) {
+    const Vector3d m = Rt * a_cam[k];
+    fr.planes[k] = {m, -(a_cam[k].dot(sensor.t) + b_cam[k])};
+  }
+  // Along the tile normal: the prisms lie within the hull of their corners P +- ramp dir,
+  // up to the bulge of a perspective cap (ramp x (pixel angle)^2 / 8, far below the margin).
+  const Vector3d& tn = p.tile_normal[tile];
+  fr.planes[6] = {tn, tl.smin - margin};
+  fr.planes[7] = {-tn, -tl.smax - margin};
+  Vector3d lo = Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (int k = 0; k < 8; ++k) {
+    const double u = (k & 1) ? u1 : u0, v = (k & 2) ? v1 : v0, z = (k & 4) ? zhi : zlo;
+    const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
+    const Vector3d X = Rt * (xc - sensor.t);
+    lo = lo.cwiseMin(X);
+    hi = hi.cwiseMax(X);
+  }
+  // March along the world axis closest to the tile's central line of sight.
+  const double uc = 0.5 * (u0 + u1), vc = 0.5 * (v0 + v1);
+  const Vector3d ray = Rt * Vector3d((uc - sensor.cx) / sensor.fx, (vc - sensor.cy) / sensor.fy, 1.0);
+  ray.cwiseAbs().maxCoeff(&fr.ax);
+  fr.bx = (fr.ax + 1) % 3, fr.cx = (fr.ax + 2) % 3;
+  const std::int64_t n_cells = std::int64_t{1} << level;
+  for (int a = 0; a < 3; ++a) {
+    fr.first[a] = std::max<std::int64_t>(0, std::int64_t(std::ceil((lo[a] - margin - root.min[a]) / h)));
+    fr.last[a] = std::min<std::int64_t>(n_cells, std::int64_t(std::floor((hi[a] + margin - root.min[a]) / h)));
+  }
+  return fr;
+}
+
+bool has_prisms(const Prepared& p, int tile, int level) {
+  const TileLevel& tl = p.tile_levels[std::size_t(tile) * L + level];
+  return tl.zmin <= tl.zmax;
+}
+
+}  // namespace
+
+bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
+                                const RootCube& root, const IntegrateOptions& options, BrickMap& map,
+                                IntegrateStats* stats_out, const BrickBox* region) {
+  Prepared p;
+  if (!prepare(frame, triangles, root, options, &p)) return false;
+  const Sensor& sensor = frame.sensor;
+  const int QW = p.QW, TX = p.TX, TY = p.TY;
+  const std::vector<Quad>& quad = p.quad;
+  const std::vector<GridTriangle>& tris = p.tris;
+  const Eigen::Matrix3d& R = sensor.R;
+  const Vector3d centre = sensor.centre();
+  IntegrateStats stats = p.stats;
   // Work items (tile, level), ordered by the brick around their middle ("home"), so that items
   // run brick region by brick region.
   const Eigen::Matrix3d Rt = R.transpose();
@@ -217,8 +317,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   const std::int64_t last_brick = (std::int64_t{1} << brick_level) - 1;
   for (int tile = 0; tile < TX * TY; ++tile)
     for (int l = 0; l < L; ++l) {
-      const TileLevel& tl = tile_levels[std::size_t(tile) * L + l];
-      if (!(tl.zmin <= tl.zmax)) continue;
+      if (!has_prisms(p, tile, l)) continue;
+      const TileLevel& tl = p.tile_levels[std::size_t(tile) * L + l];
       const double u = (tile % TX) * kTile + 0.5 * kTile + 0.5, v = (tile / TX) * kTile + 0.5 * kTile + 0.5;
       const double z = 0.5 * (tl.zmin + tl.zmax);
       const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
@@ -257,64 +357,24 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
       BlockCache cache(map);
       for (std::size_t it = range.begin(); it != range.end(); ++it) {
         const int level = items[it].level, tile = items[it].tile;
-        const int tx = tile % TX, ty = tile / TX;
-        const int c0 = tx * kTile, c1 = std::min(QW, c0 + kTile), r0 = ty * kTile, r1 = std::min(QH, r0 + kTile);
-        const TileLevel& tl = tile_levels[std::size_t(tile) * L + level];
+        ItemFrustum fr = item_frustum(p, root, tile, level);
+        if (region) fr.clip(*region, level, brick_level);
+        if (fr.empty()) continue;
+        const int c0 = fr.c0, c1 = fr.c1, r0 = fr.r0, r1 = fr.r1;
+        const int ax = fr.ax, bx = fr.bx, cx = fr.cx;
+        const std::int64_t a0 = fr.first[ax], a1 = fr.last[ax];
         const double h = root.cell_size(level);
-        const double margin = 1e-3 * h;
         double ramp_of[L];  // by the owner's level
         for (int lt = level; lt < L; ++lt) ramp_of[lt] = insertion_ramp(options, root, level, lt);
-        // The tile's frustum slab as half-spaces a . x_cam + b >= 0, moved to world coordinates.
-        const double pm = 1e-3;  // pixels
-        const double u0 = c0 + 0.5 - pm, u1 = c1 + 0.5 + pm, v0 = r0 + 0.5 - pm, v1 = r1 + 0.5 + pm;
-        const double zlo = std::max(tl.zmin - tl.ramp - margin, 1e-9), zhi = tl.zmax + tl.ramp + margin;
-        const Vector3d a_cam[6] = {{sensor.fx, 0, sensor.cx - u0}, {-sensor.fx, 0, u1 - sensor.cx},
-                                   {0, sensor.fy, sensor.cy - v0}, {0, -sensor.fy, v1 - sensor.cy},
-                                   {0, 0, 1},                      {0, 0, -1}};
-        const double b_cam[6] = {0, 0, 0, 0, -zlo, zhi};
-        HalfSpace planes[8];
-        for (int k = 0; k < 6; ++k) {
-          const Vector3d m = Rt * a_cam[k];
-          planes[k] = {m, -(a_cam[k].dot(sensor.t) + b_cam[k])};
-        }
-        // Along the tile normal: the prisms lie within the hull of their corners P +- ramp dir,
-        // up to the bulge of a perspective cap (ramp x (pixel angle)^2 / 8, far below the margin).
-        const Vector3d& tn = tile_normal[tile];
-        planes[6] = {tn, tl.smin - margin};
-        planes[7] = {-tn, -tl.smax - margin};
-        Vector3d lo = Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-        for (int k = 0; k < 8; ++k) {
-          const double u = (k & 1) ? u1 : u0, v = (k & 2) ? v1 : v0, z = (k & 4) ? zhi : zlo;
-          const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
-          const Vector3d X = Rt * (xc - sensor.t);
-          lo = lo.cwiseMin(X);
-          hi = hi.cwiseMax(X);
-        }
-        // March along the world axis closest to the tile's central line of sight.
-        const double uc = 0.5 * (u0 + u1), vc = 0.5 * (v0 + v1);
-        const Vector3d ray = Rt * Vector3d((uc - sensor.cx) / sensor.fx, (vc - sensor.cy) / sensor.fy, 1.0);
-        int ax = 0;
-        ray.cwiseAbs().maxCoeff(&ax);
-        const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
-        const double pad = margin;
-        const std::int64_t n_cells = std::int64_t{1} << level;
-        auto index_range = [&](int axis_id, double a, double b, std::int64_t* i0, std::int64_t* i1) {
-          *i0 = std::max<std::int64_t>(0, std::int64_t(std::ceil((a - pad - root.min[axis_id]) / h)));
-          *i1 = std::min<std::int64_t>(n_cells, std::int64_t(std::floor((b + pad - root.min[axis_id]) / h)));
-        };
-        std::int64_t a0, a1, b0, b1, cc0, cc1;
-        index_range(ax, lo[ax], hi[ax], &a0, &a1);
-        index_range(bx, lo[bx], hi[bx], &b0, &b1);
-        index_range(cx, lo[cx], hi[cx], &cc0, &cc1);
-        for (std::int64_t ib = b0; ib <= b1; ++ib)
-          for (std::int64_t ic = cc0; ic <= cc1; ++ic) {
+        for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib)
+          for (std::int64_t ic = fr.first[cx]; ic <= fr.last[cx]; ++ic) {
             Vector3d base;
             base[ax] = root.min[ax];
             base[bx] = root.min[bx] + h * double(ib);
             base[cx] = root.min[cx] + h * double(ic);
             double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // a0..a1 in index space
             bool empty = false;
-            for (const HalfSpace& hs : planes) {
+            for (const HalfSpace& hs : fr.planes) {
               const double v = hs.m.dot(base) - hs.k, ma = hs.m[ax];
               if (ma == 0) {
                 if (v < 0) {
@@ -394,6 +454,110 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   stats.contributions = contributions;
   *stats_out = stats;
   return true;
+}
+
+
+namespace {
+
+// The surface cells of a triangle with vertex P inserted at levels [coarsest, level] (FrameReach).
+void add_cells(const Vector3d& P, int level, int coarsest, const RootCube& root, std::vector<VoxelKey>& cells) {
+  for (int l = coarsest; l <= level; ++l) {
+    const int cl = std::max(l - 3, 0);
+    const double h = root.cell_size(cl);
+    const std::int64_t n = std::int64_t{1} << cl;
+    std::uint32_t c[3];
+    for (int a = 0; a < 3; ++a)
+      c[a] = std::uint32_t(std::clamp<std::int64_t>(std::int64_t(std::floor((P[a] - root.min[a]) / h)), 0, n - 1)
+                           << (l - cl));
+    cells.push_back(VoxelKey::make(l, c[0], c[1], c[2]));
+  }
+}
+
+template <typename T>
+void sort_unique(std::vector<T>& v) {
+  std::sort(v.begin(), v.end());
+  v.erase(std::unique(v.begin(), v.end()), v.end());
+}
+
+}  // namespace
+
+FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles, const RootCube& root,
+                       const IntegrateOptions& options, int brick_level) {
+  FrameReach reach;
+  auto add_bricks = [&](BrickCoord lo, BrickCoord hi) {  // inclusive
+    for (std::uint32_t z = lo.z; z <= hi.z; ++z)
+      for (std::uint32_t y = lo.y; y <= hi.y; ++y)
+        for (std::uint32_t x = lo.x; x <= hi.x; ++x) reach.bricks.push_back(BrickCoord{x, y, z}.packed());
+  };
+  const double bs = root.cell_size(brick_level);
+  Prepared p;
+  if (prepare(frame, triangles, root, options, &p)) {
+    // The bricks of every item's candidate box: integration evaluates no voxel outside them.
+    for (int tile = 0; tile < p.TX * p.TY; ++tile)
+      for (int l = 0; l < L; ++l) {
+        if (!has_prisms(p, tile, l)) continue;
+        const ItemFrustum fr = item_frustum(p, root, tile, l);
+        if (fr.empty()) continue;
+        const auto corner = [&](const std::int64_t* c) {
+          return brick_of(VoxelKey::make(l, std::uint32_t(c[0]), std::uint32_t(c[1]), std::uint32_t(c[2])), brick_level);
+        };
+        const BrickCoord lo = corner(fr.first), hi = corner(fr.last);
+        if (lo.packed() == hi.packed()) {
+          reach.bricks.push_back(lo.packed());
+          continue;
+        }
+        // The box of a tilted or far tile's slab spans many bricks the slab misses: keep those
+        // whose closed box (a little widened) meets every half-space of the slab.
+        for (std::uint32_t z = lo.z; z <= hi.z; ++z)
+          for (std::uint32_t y = lo.y; y <= hi.y; ++y)
+            for (std::uint32_t x = lo.x; x <= hi.x; ++x) {
+              const Vector3d centre = root.min + bs * (Vector3d(x, y, z) + Vector3d::Constant(0.5));
+              const double half = 0.5 * bs + 1e-6 * bs;
+              bool meets = true;
+              for (const HalfSpace& hs : fr.planes)
+                if (hs.m.dot(centre) + half * hs.m.cwiseAbs().sum() < hs.k) {
+                  meets = false;
+                  break;
+                }
+              if (meets) reach.bricks.push_back(BrickCoord{x, y, z}.packed());
+            }
+      }
+    // Surface cells from every other row and column of quads: a level-(l - 3) cell spans about 8
+    // pixels of a triangle inserted at its own level l, more at coarser l.
+    for (int r = 0; r < p.QH; r += 2)
+      for (int c = 0; c < p.QW; c += 2)
+        for (std::int32_t t : p.quad[std::size_t(r) * p.QW + c].tri)
+          if (t >= 0 && p.tris[t].ok)
+            add_cells(frame.position[p.tris[t].idx[0]].cast<double>(), p.tris[t].level, p.tris[t].coarsest, root,
+                      reach.cells);
+  } else {
+    // Any sensor: per triangle, the bricks of its bounding box widened by its longest ramp (a
+    // voxel gets a contribution only within a ramp of its triangle).
+    const std::int64_t last = (std::int64_t{1} << brick_level) - 1;
+    auto coord = [&](const Vector3d& X) {
+      std::uint32_t c[3];
+      for (int a = 0; a < 3; ++a)
+        c[a] = std::uint32_t(std::clamp<std::int64_t>(std::int64_t(std::floor((X[a] - root.min[a]) / bs)), 0, last));
+      return BrickCoord{c[0], c[1], c[2]};
+    };
+    for (const FrameTriangle& tri : triangles) {
+      int lt = 0, coarsest = 0;
+      if (!insertion_levels(frame, tri.data(), root, options, &lt, &coarsest)) continue;
+      Eigen::AlignedBox3d box;
+      for (std::uint32_t i : tri) box.extend(frame.position[i].cast<double>());
+      const double pad = insertion_ramp(options, root, coarsest, lt) + 1e-6 * bs;
+      const BrickCoord lo = coord(box.min() - Vector3d::Constant(pad)), hi = coord(box.max() + Vector3d::Constant(pad));
+      if (lo.packed() == hi.packed()) {
+        if (reach.bricks.empty() || reach.bricks.back() != lo.packed()) reach.bricks.push_back(lo.packed());
+      } else {
+        add_bricks(lo, hi);
+      }
+      add_cells(frame.position[tri[0]].cast<double>(), lt, coarsest, root, reach.cells);
+    }
+  }
+  sort_unique(reach.bricks);
+  sort_unique(reach.cells);
+  return reach;
 }
 
 }  // namespace sf

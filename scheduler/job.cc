@@ -132,6 +132,35 @@ std::string hex16(std::uint64_t v) {
   return buf;
 }
 
+// A sweep's plan as text: "x0 y0 z0 x1 y1 z1" per tile, tiles separated by ';'.
+std::string tiles_text(const std::vector<BrickBox>& tiles) {
+  std::ostringstream o;
+  for (std::size_t i = 0; i < tiles.size(); ++i) {
+    const BrickBox& t = tiles[i];
+    o << (i ? ";" : "") << t.lo.x << ' ' << t.lo.y << ' ' << t.lo.z << ' ' << t.hi.x << ' ' << t.hi.y << ' ' << t.hi.z;
+  }
+  return o.str();
+}
+
+std::vector<BrickBox> parse_tiles(const std::string& text, const std::string& where) {
+  std::vector<BrickBox> tiles;
+  std::istringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ';')) {
+    std::istringstream f(item);
+    BrickBox t;
+    if (!(f >> t.lo.x >> t.lo.y >> t.lo.z >> t.hi.x >> t.hi.y >> t.hi.z))
+      throw InputError(where + ": job journal: malformed sweep plan '" + item + "'");
+    tiles.push_back(t);
+  }
+  return tiles;
+}
+
+std::size_t meta_count(sqlite3* db, const std::string& key, const std::string& where) {
+  const std::string v = meta(db, key, where);
+  return v.empty() ? 0 : std::stoull(v);
+}
+
 // Records depth maps [from, frames.size()) in the inputs table (inside the caller's transaction).
 void insert_inputs(sqlite3* db, const std::vector<FrameIdentity>& frames, std::size_t from, const std::string& where) {
   Statement ins(db, "INSERT INTO inputs(idx, name, size, hash) VALUES(?1, ?2, ?3, ?4)", where);
@@ -234,7 +263,7 @@ std::optional<int> Job::fixed_brick_level() const {
   return std::stoi(text);
 }
 
-std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) {
+IntegrationProgress Job::begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) {
   const std::string where = options_.dir.string();
   map.attach_store(store_.get(), options_.memory_limit);
   const std::string version = meta(db_, "version", where);
@@ -253,7 +282,7 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
     insert_inputs(db_, frames, 0, where);
     t.commit();
     store_->remove_all_except({});
-    return 0;
+    return progress_ = IntegrationProgress{};
   }
   if (std::stoi(version) != kJobVersion)
     throw InputError(where + ": job format version " + version + ", this build handles " + std::to_string(kJobVersion));
@@ -312,8 +341,17 @@ std::size_t Job::begin(const std::vector<FrameIdentity>& frames, const RootCube&
       throw InputError(store_->path(e.coord, e.generation).string() + ": tile of the last checkpoint is missing");
   store_->remove_all_except(keep);
   map.restore(manifest, std::stoull(meta(db_, "max_generation", where)));
-  done_ = std::stoull(meta(db_, "integrated", where));
-  return done_;
+  progress_.integrated = meta_count(db_, "integrated", where);
+  progress_.sweep_end = std::max(progress_.integrated, meta_count(db_, "sweep_end", where));
+  if (progress_.sweeping()) {
+    progress_.tiles = parse_tiles(meta(db_, "sweep_tiles", where), where);
+    progress_.tile = meta_count(db_, "sweep_tile", where);
+    progress_.tile_frames = meta_count(db_, "sweep_tile_frames", where);
+    progress_.steps = meta_count(db_, "sweep_steps", where);
+    if (progress_.tiles.empty() || progress_.tile > progress_.tiles.size() || progress_.sweep_end > frames.size())
+      throw InputError(where + ": job journal: inconsistent sweep record");
+  }
+  return progress_;
 }
 
 void Job::checkpoint(BrickMap& map, const char* stage) {
@@ -326,7 +364,12 @@ void Job::checkpoint(BrickMap& map, const char* stage) {
     ins.bind(1, e.coord.x).bind(2, e.coord.y).bind(3, e.coord.z).bind(4, std::int64_t(e.generation));
     ins.bind(5, std::int64_t(e.bytes)).run();
   }
-  set_meta(db_, "integrated", std::to_string(done_), where);
+  set_meta(db_, "integrated", std::to_string(progress_.integrated), where);
+  set_meta(db_, "sweep_end", std::to_string(progress_.sweep_end), where);
+  set_meta(db_, "sweep_tiles", tiles_text(progress_.tiles), where);
+  set_meta(db_, "sweep_tile", std::to_string(progress_.tile), where);
+  set_meta(db_, "sweep_tile_frames", std::to_string(progress_.tile_frames), where);
+  set_meta(db_, "sweep_steps", std::to_string(progress_.steps), where);
   set_meta(db_, "max_generation", std::to_string(map.max_generation()), where);
   set_meta(db_, "stage", stage, where);
   set_meta(db_, "checkpoint_time", utc_now(), where);
@@ -337,21 +380,25 @@ void Job::checkpoint(BrickMap& map, const char* stage) {
   last_checkpoint_ = std::chrono::steady_clock::now();
 }
 
-void Job::frame_done(std::size_t done, BrickMap& map) {
-  done_ = done;
+void Job::step_done(const IntegrationProgress& progress, BrickMap& map) {
+  progress_ = progress;
   ++since_checkpoint_;
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - last_checkpoint_).count();
   if (since_checkpoint_ >= options_.checkpoint_every || elapsed >= options_.checkpoint_seconds)
     checkpoint(map, "integrating");
   map.enforce_limit();
-  if (options_.kill_after > 0 && done == options_.kill_after) ::kill(::getpid(), SIGKILL);
-  if (options_.term_after > 0 && done == options_.term_after) ::kill(::getpid(), SIGTERM);
+  const std::size_t step = progress.integrated + progress.steps;
+  if (options_.kill_after > 0 && step == options_.kill_after) ::kill(::getpid(), SIGKILL);
+  if (options_.term_after > 0 && step == options_.term_after) ::kill(::getpid(), SIGTERM);
 }
 
-void Job::integrated(BrickMap& map) { checkpoint(map, "integrated"); }
+void Job::integrated(const IntegrationProgress& progress, BrickMap& map) {
+  progress_ = progress;
+  checkpoint(map, "integrated");
+}
 
-void Job::interrupted(std::size_t done, BrickMap& map) {
-  done_ = done;
+void Job::interrupted(const IntegrationProgress& progress, BrickMap& map) {
+  progress_ = progress;
   checkpoint(map, "integrating");
 }
 
@@ -372,8 +419,18 @@ JobStatus Job::recorded(const std::filesystem::path& dir, std::string* config) {
     if (st.stage.empty()) st.stage = "new";
     st.input = meta(db, "input", where);
     st.output = meta(db, "output", where);
-    const std::string integrated = meta(db, "integrated", where);
-    st.integrated = integrated.empty() ? 0 : std::stoull(integrated);
+    IntegrationProgress p;
+    p.integrated = meta_count(db, "integrated", where);
+    p.sweep_end = std::max(p.integrated, meta_count(db, "sweep_end", where));
+    if (p.sweeping()) {
+      p.tiles = parse_tiles(meta(db, "sweep_tiles", where), where);
+      p.tile = meta_count(db, "sweep_tile", where);
+      p.steps = meta_count(db, "sweep_steps", where);
+    }
+    st.integrated = p.whole_frames();
+    st.sweep_tiles = p.tiles.size();
+    st.sweep_tile = p.tile;
+    st.sweep_steps = p.steps;
     st.last_checkpoint = meta(db, "checkpoint_time", where);
     st.follow = meta(db, "follow", where) == "1";
     if (config) *config = meta(db, "config", where);

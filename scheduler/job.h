@@ -36,12 +36,12 @@ class JobMismatch : public InputError {
 struct JobOptions {
   std::filesystem::path dir;
   std::size_t memory_limit = std::size_t{1} << 30;  // bytes of resident bricks
-  std::size_t checkpoint_every = 50;                // depth maps
+  std::size_t checkpoint_every = 50;                // integration steps (depth maps x tiles they reach)
   double checkpoint_seconds = 300;
-  // Testing aid: the process kills itself (SIGKILL, no clean-up) once this many depth maps are
-  // integrated, after any checkpoint due at that point. 0 = never.
+  // Testing aid: the process kills itself (SIGKILL, no clean-up) once depth maps integrated + steps
+  // of the sweep under way reach this, after any checkpoint due at that point. 0 = never.
   std::size_t kill_after = 0;
-  // Testing aid: the process sends itself SIGTERM once this many depth maps are integrated. 0 = never.
+  // Testing aid: the same, sending itself SIGTERM. 0 = never.
   std::size_t term_after = 0;
   // `scalefuse add`: the inputs may extend the job's (its depth maps first, unchanged).
   bool allow_new_inputs = false;
@@ -54,6 +54,8 @@ struct JobStatus {
   std::string stage;  // "new", "integrating", "integrated", "done"
   std::string input, output;  // input: the job's input folders, one per line
   std::size_t depth_maps = 0, integrated = 0, bricks = 0;
+  // A sweep under way (sweep_tiles > 0): its tiles, the tile it is in, steps done.
+  std::size_t sweep_tiles = 0, sweep_tile = 0, sweep_steps = 0;
   std::uint64_t tile_bytes = 0, journal_bytes = 0;
   std::string last_checkpoint;  // UTC time, empty if none
   bool follow = false;          // started by fuse --follow
@@ -71,11 +73,11 @@ class Job : public FusionJournal {
 
   std::optional<RootCube> fixed_root() const override;
   std::optional<int> fixed_brick_level() const override;
-  std::size_t begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) override;
+  IntegrationProgress begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) override;
   void inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) override;
-  void frame_done(std::size_t done, BrickMap& map) override;
-  void integrated(BrickMap& map) override;
-  void interrupted(std::size_t done, BrickMap& map) override;
+  void step_done(const IntegrationProgress& progress, BrickMap& map) override;
+  void integrated(const IntegrationProgress& progress, BrickMap& map) override;
+  void interrupted(const IntegrationProgress& progress, BrickMap& map) override;
   // Records the finished mesh (already written to `mesh`).
   void finished(const std::filesystem::path& mesh);
 
@@ -97,7 +99,8 @@ class Job : public FusionJournal {
   sqlite3* db_ = nullptr;
   int lock_fd_ = -1;
   std::unique_ptr<TileStore> store_;
-  std::size_t since_checkpoint_ = 0, checkpoints_ = 0, done_ = 0;
+  std::size_t since_checkpoint_ = 0, checkpoints_ = 0;
+  IntegrationProgress progress_;  // as of the last step
   std::chrono::steady_clock::time_point last_checkpoint_;
 };
 

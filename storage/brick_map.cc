@@ -20,6 +20,19 @@ BrickCoord brick_of(VoxelKey key, int brick_level) {
   return BrickCoord{axis(key.x()), axis(key.y()), axis(key.z())};
 }
 
+void BrickBox::voxel_range(int level, int brick_level, int axis, std::int64_t* first, std::int64_t* last) const {
+  const std::int64_t b0 = axis == 0 ? lo.x : axis == 1 ? lo.y : lo.z;
+  const std::int64_t b1 = axis == 0 ? hi.x : axis == 1 ? hi.y : hi.z;
+  // Voxel c of level l lies in brick floor(c 2^B / 2^l) (the last brick also takes c = 2^l), so
+  // brick b starts at voxel ceil(b 2^l / 2^B).
+  auto start = [&](std::int64_t b) {
+    return level >= brick_level ? b << (level - brick_level)
+                                : (b + (std::int64_t{1} << (brick_level - level)) - 1) >> (brick_level - level);
+  };
+  *first = start(b0);
+  *last = b1 == (std::int64_t{1} << brick_level) ? (std::int64_t{1} << level) : start(b1) - 1;
+}
+
 // Memory a resident brick holds: its blocks and index, and the brick itself.
 static std::size_t resident_size(const Brick& b) { return b.voxels.memory_bytes() + sizeof(Brick); }
 
@@ -157,15 +170,39 @@ void BrickMap::enforce_limit() {
   });
   for (Brick* b : resident) {
     if (resident_bytes() <= target) break;
-    if (b->dirty || b->generation == 0) write_tile_of(*b);
-    resident_bytes_ -= std::int64_t(resident_size(*b));
-    b->voxels.clear();
-    b->resident = false;
-    ++spill_.spilled;
+    spill(*b);
   }
   // The spilled bricks' blocks were many small allocations, freed from several threads' malloc
   // arenas: hand the free pages back, or the process keeps them although the budget is met.
   ::malloc_trim(0);
+}
+
+void BrickMap::spill(Brick& b) {
+  if (b.dirty || b.generation == 0) write_tile_of(b);
+  b.field_bytes = resident_size(b);
+  resident_bytes_ -= std::int64_t(b.field_bytes);
+  b.voxels.clear();
+  b.resident = false;
+  ++spill_.spilled;
+}
+
+void BrickMap::spill_all() {
+  if (!store_) throw std::logic_error("BrickMap::spill_all without a tile store");
+  // No malloc_trim here: the next tile reuses the freed heap, and returning it would only make the
+  // kernel clear the same pages again.
+  for (Brick* b : bricks())
+    if (b->resident) spill(*b);
+}
+
+std::vector<std::pair<BrickCoord, std::size_t>> BrickMap::field_bytes() const {
+  // A restored brick's size is unknown until loaded: LZ4 shrinks a field about threefold.
+  constexpr std::size_t kTileToField = 3;
+  std::vector<std::pair<BrickCoord, std::size_t>> out;
+  for (Brick* b : bricks())
+    out.push_back({b->coord, b->resident ? resident_size(*b)
+                             : b->field_bytes ? b->field_bytes
+                                              : b->tile_bytes * kTileToField});
+  return out;
 }
 
 std::vector<ManifestEntry> BrickMap::write_checkpoint() {

@@ -13,6 +13,7 @@
 #include <mutex>
 #include <shared_mutex>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "storage/voxel_key.h"
@@ -28,6 +29,21 @@ struct BrickCoord {
 // Brick of a voxel for brick level `brick_level`.
 BrickCoord brick_of(VoxelKey key, int brick_level);
 
+// A box of bricks, lo <= coord < hi per axis: a tile of the integration plan (scheduler/tile_plan.h).
+struct BrickBox {
+  BrickCoord lo, hi;
+  static BrickBox whole(int brick_level) {
+    const std::uint32_t n = 1u << brick_level;
+    return {{0, 0, 0}, {n, n, n}};
+  }
+  bool contains(BrickCoord c) const {
+    return c.x >= lo.x && c.x < hi.x && c.y >= lo.y && c.y < hi.y && c.z >= lo.z && c.z < hi.z;
+  }
+  // The voxel indices [first, last] of level `level` along `axis` (0..2) whose voxels belong
+  // (brick_of) to the box's bricks; first > last if none.
+  void voxel_range(int level, int brick_level, int axis, std::int64_t* first, std::int64_t* last) const;
+};
+
 struct Brick {
   explicit Brick(BrickCoord c, int brick_level) : coord(c), voxels(brick_level) {}
   BrickCoord coord;
@@ -40,6 +56,7 @@ struct Brick {
   std::uint64_t generation = 0;          // newest tile, 0 = none
   std::uint64_t checkpoint_generation = 0;  // the tile the last committed checkpoint refers to
   std::uint64_t tile_bytes = 0;          // size of tile `generation`
+  std::uint64_t field_bytes = 0;         // memory it held when last resident (0: unknown)
   std::uint64_t last_use = 0;            // epoch of the last access (least recently used spills first)
 };
 
@@ -104,6 +121,7 @@ class BrickMap {
   // Memory the caller holds outside the bricks (depth maps in flight and their working sets): the
   // bricks get the limit minus this, but at least a quarter of the limit.
   void set_reserve(std::size_t bytes) { reserve_ = bytes; }
+  std::size_t memory_limit() const { return memory_limit_; }
   std::size_t brick_budget() const {
     return std::max(memory_limit_ / 4, memory_limit_ > reserve_ ? memory_limit_ - reserve_ : std::size_t{0});
   }
@@ -112,6 +130,11 @@ class BrickMap {
   // Spills least recently used bricks (ties by coordinate) until resident memory fits the limit.
   // Not safe concurrently with any other access.
   void enforce_limit();
+  // Spills every resident brick (a plan tile is finished: its bricks are not touched again).
+  void spill_all();
+  // The memory each brick's field takes when resident (for planning): measured for bricks that
+  // were resident in this process, estimated from the tile size for restored ones.
+  std::vector<std::pair<BrickCoord, std::size_t>> field_bytes() const;
   // Writes every changed resident brick to a new tile and returns the manifest of all bricks.
   std::vector<ManifestEntry> write_checkpoint();
   // After the manifest is committed: tiles the previous checkpoint referred to are deleted.
@@ -133,6 +156,7 @@ class BrickMap {
   const Brick* find_brick(BrickCoord c) const;
   void make_resident(Brick& b);   // caller holds b.mutex
   void write_tile_of(Brick& b);   // caller holds b.mutex (or has exclusive access)
+  void spill(Brick& b);           // exclusive access
 
   int brick_level_;
   const TileStore* store_ = nullptr;

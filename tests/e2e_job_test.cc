@@ -95,22 +95,37 @@ TEST(Job, KilledAtSeveralPointsAndResumedGivesTheSameMesh) {
   const fs::path ref = dir / "ref.ply";
   ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
   const std::string expected = bytes_of(ref);
-  for (int kill_after : {1, 4, 7, 10}) {
+  // With a 4 MB limit the integration sweeps many tiles, a depth map reaching several: the steps
+  // (tile, depth map) of that plan, to kill at its start, within, and just before its end.
+  const fs::path planned = dir / "planned.ply";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + planned.string() + " -q --memory-limit 4M --stats " +
+                      planned.string() + ".json " + kScene)
+                .code,
+            0);
+  const auto plan = nlohmann::json::parse(bytes_of(planned.string() + ".json"));
+  const int steps = plan["sweep_steps"], tiles = plan["tiles"];
+  ASSERT_GT(tiles, 4);
+  ASSERT_GT(steps, 30);
+  EXPECT_TRUE(bytes_of(planned) == expected) << "a sweep of " << tiles << " tiles";
+  for (int kill_after : {1, 4, steps / 2 + 1, steps - 1}) {
     const fs::path out = dir / numbered("k", kill_after, ".ply");
     const fs::path job = dir / numbered("k", kill_after, ".job");
     const CliRun killed = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() +
                                      " -q --memory-limit 4M --checkpoint-every 3 " + kScene,
                                  "SCALEFUSE_TEST_KILL_AFTER=" + std::to_string(kill_after));
-    EXPECT_NE(killed.code, 0) << "the process was to kill itself after " << kill_after << " depth maps";
+    EXPECT_NE(killed.code, 0) << "the process was to kill itself after " << kill_after << " steps";
     EXPECT_FALSE(fs::exists(out));
     const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
-    EXPECT_EQ(st["integrated"], kill_after / 3 * 3) << "last checkpoint before the kill";
+    EXPECT_EQ(st["integrated"], 0) << "no depth map is in every tile yet";
+    EXPECT_EQ(st["sweep"]["tiles"], kill_after >= 3 ? tiles : 0) << "the plan is recorded with the first checkpoint";
+    EXPECT_EQ(st["sweep"]["steps"], kill_after / 3 * 3) << "last checkpoint before the kill";
     const CliRun resumed = scalefuse("resume " + job.string() + " -q --memory-limit 4M --checkpoint-every 3 --stats " +
                                   out.string() + ".json");
     ASSERT_EQ(resumed.code, 0) << resumed.output;
     EXPECT_TRUE(bytes_of(out) == expected) << "killed after " << kill_after;
     const auto stats = nlohmann::json::parse(bytes_of(out.string() + ".json"));
     EXPECT_EQ(stats["resumed_at"], kill_after / 3 * 3);
+    EXPECT_EQ(stats["sweep_steps"], steps - kill_after / 3 * 3) << "the resumed run does only what is left";
   }
 }
 

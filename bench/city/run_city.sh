@@ -7,10 +7,10 @@
 #   3. compares the two integrated fields brick by brick (final checkpoint tiles, byte for byte);
 #   4. unless SKIP_EXTRACT=1, regularization and extraction of the limited job (scalefuse resume).
 # Prints wall time, peak RSS, spill traffic, tile bytes and voxels per level.
-# Usage: bench/city/run_city.sh   (env: WORK=/tmp/scalefuse-bench LIMIT=1.5G THREADS=2 SKIP_EXTRACT=0)
+# Usage: bench/city/run_city.sh   (env: WORK=/tmp/scalefuse-bench LIMIT=1.5G THREADS=2 SKIP_EXTRACT=0 BIN=build/bin/scalefuse)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-BIN="$PWD/build/bin/scalefuse"
+BIN="${BIN:-$PWD/build/bin/scalefuse}"
 DATA=../shared/data
 WORK="${WORK:-/tmp/scalefuse-bench}"
 LIMIT="${LIMIT:-1.5G}"
@@ -39,6 +39,8 @@ sp = s["spill"]
 print(f"{name}: wall {wall}, peak RSS {rss / 1024:.0f} MiB; {s['depth_maps']} depth maps, {s['samples']} samples")
 print(f"  integrate {s['seconds']['integrate']:.1f} s = {s['samples'] / s['seconds']['integrate'] / 1e6:.3f} M samples/s"
       f"; peak RSS at its end {s['peak_rss_integrate_bytes'] / 2**20:.0f} MiB")
+print(f"  plan: {s['tiles']} tiles, {s['sweep_steps']} steps, {s['frame_reads']} depth-map reads; "
+      f"field estimated {s['plan_estimate_bytes'] / 2**30:.2f} GiB, measured {s['field_bytes'] / 2**30:.2f} GiB")
 print(f"  spilled {sp['bricks_spilled']} / reloaded {sp['bricks_reloaded']} bricks, "
       f"{sp['bytes_written'] / 2**30:.2f} GiB written / {sp['bytes_read'] / 2**30:.2f} GiB read")
 for l in s["levels"]:

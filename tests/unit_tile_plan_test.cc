@@ -1,0 +1,161 @@
+// The integration plan (scheduler/tile_plan.h): brick boxes, their voxel ranges, the cut into
+// tiles, and integration restricted to a tile, which must give each voxel exactly what the whole
+// depth map gives it.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+
+#include "engine/depth_frame.h"
+#include "engine/integrate.h"
+#include "engine/triangulate.h"
+#include "scheduler/tile_plan.h"
+#include "storage/brick_map.h"
+
+namespace sf {
+namespace {
+
+// A tilted, wavy depth map with a discontinuity, colours and confidences, seen off-axis.
+DepthFrame wavy_frame() {
+  DepthFrame f;
+  f.name = "wavy";
+  f.width = 37;
+  f.height = 29;
+  f.sensor.fx = 30;
+  f.sensor.fy = 33;
+  f.sensor.cx = 18.2;
+  f.sensor.cy = 14.9;
+  const Eigen::Vector3d C(0.31, -0.23, 0.07);
+  const Eigen::Vector3d z = Eigen::Vector3d(0.45, 0.6, 1).normalized(), x = Eigen::Vector3d::UnitY().cross(z).normalized();
+  f.sensor.R.row(0) = x;
+  f.sensor.R.row(1) = z.cross(x);
+  f.sensor.R.row(2) = z;
+  f.sensor.t = -f.sensor.R * C;
+  std::vector<float> depth(f.size());
+  for (int r = 0; r < f.height; ++r)
+    for (int c = 0; c < f.width; ++c)
+      depth[r * f.width + c] = float(1.2 + 0.03 * c + 0.05 * std::sin(0.7 * r) + (c > 22 ? 0.5 : 0.0));
+  fill_perspective_samples(f, depth, false);
+  f.confidence.resize(f.size());
+  for (std::size_t i = 0; i < f.size(); ++i) f.confidence[i] = float(0.5 + 0.5 * std::cos(0.1 * double(i)));
+  return f;
+}
+
+// Every voxel of `a` is in `b` with the same bits, and the counts agree.
+void expect_same_field(const BrickMap& a, const BrickMap& b) {
+  std::size_t n = 0;
+  for (Brick* br : a.bricks())
+    br->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+      const VoxelData* w = b.find(k);
+      ASSERT_NE(w, nullptr) << "level " << k.level() << " voxel " << k.x() << "," << k.y() << "," << k.z();
+      EXPECT_EQ(v.distance, w->distance);
+      EXPECT_EQ(v.weight, w->weight);
+      ++n;
+    });
+  EXPECT_EQ(n, b.voxel_count());
+}
+
+}  // namespace
+
+TEST(BrickBox, VoxelRangeIsWhereBrickOfPutsTheVoxels) {
+  // By hand: 4 bricks per axis (brick level 2), bricks 1..2 along x. Level 4 has 16 cells: voxels
+  // 4..11. Level 1 has voxels 0, 1, 2 at bricks 0, 2 and 4 -> the last brick (3): only voxel 1.
+  const BrickBox box{{1, 0, 0}, {3, 4, 4}};
+  std::int64_t first, last;
+  box.voxel_range(4, 2, 0, &first, &last);
+  EXPECT_EQ(first, 4);
+  EXPECT_EQ(last, 11);
+  box.voxel_range(1, 2, 0, &first, &last);
+  EXPECT_EQ(first, 1);
+  EXPECT_EQ(last, 1);
+  box.voxel_range(4, 2, 1, &first, &last);  // up to the root's upper face, which the last brick holds
+  EXPECT_EQ(first, 0);
+  EXPECT_EQ(last, 16);
+  // Against brick_of, for every level, box and voxel along one axis.
+  const int B = 3;
+  for (int level = 0; level <= 6; ++level)
+    for (std::uint32_t lo = 0; lo < 8; ++lo)
+      for (std::uint32_t hi = lo + 1; hi <= 8; ++hi) {
+        const BrickBox b{{lo, 0, 0}, {hi, 8, 8}};
+        b.voxel_range(level, B, 0, &first, &last);
+        for (std::uint32_t c = 0; c <= (1u << level); ++c) {
+          const bool in = b.contains(brick_of(VoxelKey::make(level, c, 0, 0), B));
+          EXPECT_EQ(in, std::int64_t(c) >= first && std::int64_t(c) <= last)
+              << "level " << level << " box " << lo << ".." << hi << " voxel " << c;
+        }
+      }
+}
+
+TEST(TilePlan, CutsTheLongestAxisAtTheWeightedMedian) {
+  // Four bricks in a row along y, weights 1, 1, 1, 3, target 3: the median splits {y 0..2} from
+  // {y 3}; the first half (3) fits. The grid is 8 bricks per axis; tiles cover it all.
+  std::vector<std::pair<BrickCoord, double>> bricks = {
+      {{2, 0, 5}, 1.0}, {{2, 1, 5}, 1.0}, {{2, 2, 5}, 1.0}, {{2, 3, 5}, 3.0}};
+  const std::vector<BrickBox> tiles = cut_tiles(bricks, 3, 3.0);
+  ASSERT_EQ(tiles.size(), 2u);
+  EXPECT_EQ(tiles[0].lo.y, 0u);
+  EXPECT_EQ(tiles[0].hi.y, 3u);
+  EXPECT_EQ(tiles[1].lo.y, 3u);
+  EXPECT_EQ(tiles[1].hi.y, 8u);
+  EXPECT_EQ(tiles[0].hi.x, 8u);
+  EXPECT_EQ(tile_of(tiles, {2, 2, 5}), 0u);
+  EXPECT_EQ(tile_of(tiles, {7, 7, 7}), 1u);
+  // One brick heavier than the target is a tile of its own; everything fits one tile.
+  EXPECT_EQ(cut_tiles({{{1, 1, 1}, 10.0}}, 3, 1.0).size(), 1u);
+  EXPECT_EQ(cut_tiles(bricks, 3, 6.0).size(), 1u);
+}
+
+TEST(TilePlan, EveryBrickLiesInExactlyOneTileWithinTheTarget) {
+  std::vector<std::pair<BrickCoord, double>> bricks;
+  for (std::uint32_t z = 0; z < 16; ++z)
+    for (std::uint32_t y = 0; y < 16; ++y)
+      for (std::uint32_t x = 0; x < 16; ++x)
+        if ((x * 7 + y * 3 + z * 5) % 4 == 0) bricks.push_back({{x, y, z}, 1.0 + (x + y) % 3});
+  const std::vector<BrickBox> tiles = cut_tiles(bricks, 4, 40.0);
+  EXPECT_GT(tiles.size(), 10u);
+  std::vector<double> load(tiles.size(), 0.0);
+  for (const auto& [c, w] : bricks) {
+    int holders = 0;
+    for (const BrickBox& t : tiles) holders += t.contains(c);
+    EXPECT_EQ(holders, 1);
+    load[tile_of(tiles, c)] += w;
+  }
+  for (double l : load) EXPECT_LE(l, 40.0);
+}
+
+TEST(TilePlan, IntegratingTileByTileGivesTheWholeFieldAndReachCoversIt) {
+  const DepthFrame f = wavy_frame();
+  const auto tris = triangulate(f, {});
+  const RootCube root{Eigen::Vector3d(-1, -1, 0), 3.3};
+  IntegrateOptions opt;
+  opt.gamma = 4.0;
+  opt.coarser_levels = 3;
+  for (bool prisms : {false, true}) {
+    const int B = 4;
+    BrickMap whole(B), tiled(B);
+    if (prisms)
+      integrate_frame_prisms(f, tris, root, opt, whole);
+    else
+      integrate_frame(f, tris, root, opt, whole);
+    ASSERT_GT(whole.voxel_count(), 1000u);
+    const FrameReach reach = frame_reach(f, tris, root, opt, B);
+    std::set<std::uint64_t> reached(reach.bricks.begin(), reach.bricks.end());
+    std::vector<std::pair<BrickCoord, double>> weights;
+    for (Brick* b : whole.bricks()) {
+      EXPECT_TRUE(reached.count(b->coord.packed())) << "a brick the depth map writes is missing from its reach";
+      weights.push_back({b->coord, double(b->voxels.live_count())});
+    }
+    EXPECT_FALSE(reach.cells.empty());
+    const std::vector<BrickBox> tiles = cut_tiles(weights, B, double(whole.voxel_count()) / 5);
+    ASSERT_GE(tiles.size(), 4u);
+    for (const BrickBox& t : tiles) {
+      if (prisms)
+        integrate_frame_prisms(f, tris, root, opt, tiled, &t);
+      else
+        integrate_frame(f, tris, root, opt, tiled, &t);
+    }
+    expect_same_field(whole, tiled);
+  }
+}
+
+}  // namespace sf
