@@ -119,13 +119,16 @@ TEST(Job, KilledAtSeveralPointsAndResumedGivesTheSameMesh) {
     EXPECT_EQ(st["integrated"], 0) << "no depth map is in every tile yet";
     EXPECT_EQ(st["sweep"]["tiles"], kill_after >= 3 ? tiles : 0) << "the plan is recorded with the first checkpoint";
     EXPECT_EQ(st["sweep"]["steps"], kill_after / 3 * 3) << "last checkpoint before the kill";
-    const CliRun resumed = scalefuse("resume " + job.string() + " -q --memory-limit 4M --checkpoint-every 3 --stats " +
-                                  out.string() + ".json");
+    // Resumed with another limit, the job keeps its recorded plan.
+    const std::string limit = kill_after == steps / 2 + 1 ? "1G" : "4M";
+    const CliRun resumed = scalefuse("resume " + job.string() + " -q --memory-limit " + limit +
+                                  " --checkpoint-every 3 --stats " + out.string() + ".json");
     ASSERT_EQ(resumed.code, 0) << resumed.output;
     EXPECT_TRUE(bytes_of(out) == expected) << "killed after " << kill_after;
     const auto stats = nlohmann::json::parse(bytes_of(out.string() + ".json"));
     EXPECT_EQ(stats["resumed_at"], kill_after / 3 * 3);
     EXPECT_EQ(stats["sweep_steps"], steps - kill_after / 3 * 3) << "the resumed run does only what is left";
+    EXPECT_EQ(stats["tiles"], tiles);
   }
 }
 
@@ -222,11 +225,14 @@ TEST(Job, AddingDepthMapsToAFinishedJobEqualsFusingThemAllAtOnce) {
   const fs::path job = dir / "job", out = dir / "grown.ply";
   ASSERT_EQ(scalefuse("fuse " + (dir / "first").string() + " -o " + out.string() + " --job " + job.string() + " " + scene).code, 0);
   EXPECT_FALSE(bytes_of(out) == bytes_of(dir / "all.ply"));
-  const CliRun added = scalefuse("add " + job.string() + " " + (dir / "more").string() + " -q --stats " +
+  // The new depth maps are swept over tiles of a small limit, planned around the bricks the job holds.
+  const CliRun added = scalefuse("add " + job.string() + " " + (dir / "more").string() + " -q --memory-limit 4M --stats " +
                                  (dir / "add.json").string());
   ASSERT_EQ(added.code, 0) << added.output;
   EXPECT_TRUE(bytes_of(out) == bytes_of(dir / "all.ply"));
-  EXPECT_EQ(nlohmann::json::parse(bytes_of(dir / "add.json"))["resumed_at"], 6);
+  const auto add_stats = nlohmann::json::parse(bytes_of(dir / "add.json"));
+  EXPECT_EQ(add_stats["resumed_at"], 6);
+  EXPECT_GT(add_stats["tiles"].get<int>(), 1);
   const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
   EXPECT_EQ(st["depth_maps"], 10);
   EXPECT_EQ(st["integrated"], 10);
