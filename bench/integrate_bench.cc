@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
   struct Method {
     const char* name;
     IntegrateStats (*run)(const DepthFrame&, const std::vector<FrameTriangle>&, const RootCube&, const IntegrateOptions&,
-                          BrickMap&);
+                          BrickMap&, const BrickBox*);
   };
   const Method methods[] = {{"voxel-centric (default)", &integrate_frame}, {"prisms", &integrate_frame_prisms}};
   for (const Method& method : methods)
@@ -78,7 +78,7 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       arena.execute([&] {
         contributions = 0;
-        for (int i = 0; i < frames; ++i) contributions += method.run(views[i], tris[i], root, opt, map).contributions;
+        for (int i = 0; i < frames; ++i) contributions += method.run(views[i], tris[i], root, opt, map, nullptr).contributions;
       });
       runs.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
       voxels = map.voxel_count();

@@ -242,6 +242,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
   const std::atomic<bool>* stop = hooks.follow ? nullptr : hooks.stop;
   bool stopped = false;
+  double plan_seconds = 0;
   for (;;) {
     // A sweep: the one under way in the job, else one over every depth map not yet integrated.
     const std::size_t from = progress.integrated, to = progress.sweeping() ? progress.sweep_end : frames.size();
@@ -254,8 +255,10 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
         tile_frames.resize(1);
         for (std::size_t i = from; i < to; ++i) tile_frames[0].push_back(i);
       } else {
+        const auto plan_start = Clock::now();
         std::vector<std::vector<std::uint64_t>> reach_bricks(to - from);
         std::vector<VoxelKey> cells;
+        std::size_t cells_unique = 0;
         std::mutex cells_mutex;
         tbb::parallel_for(from, to, [&](std::size_t i) {
           LateSamples late;
@@ -264,6 +267,13 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
           reach_bricks[i - from] = std::move(r.bricks);
           std::lock_guard lock(cells_mutex);
           cells.insert(cells.end(), r.cells.begin(), r.cells.end());
+          // Overlapping views share most cells: merge as they come, so the list stays near the
+          // number of distinct cells rather than their sum over depth maps.
+          if (cells.size() > 2 * cells_unique + (std::size_t{1} << 20)) {
+            std::sort(cells.begin(), cells.end());
+            cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+            cells_unique = cells.size();
+          }
           report(hooks.progress, "plan", double(reads.load()), double(to - from));
         });
         if (!progress.sweeping()) {
@@ -295,6 +305,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
           for (std::size_t t = 0; t < progress.tiles.size(); ++t)
             if (reaches[t]) tile_frames[t].push_back(i);
         }
+        plan_seconds += std::chrono::duration<double>(Clock::now() - plan_start).count();
       }
       progress.sweep_end = to;
       stats.tiles = progress.tiles.size();
@@ -393,7 +404,10 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   stats.triangles = integ.triangles;
   stats.contributions = integ.contributions;
   for (int l = 0; l <= kMaxLevel; ++l) stats.triangles_per_level[l] = integ.triangles_per_level[l];
+  // The plan passes ran inside the integration's time: report them apart.
+  stats.times.push_back({"plan", plan_seconds});
   end_stage("integrate");
+  stats.times.back().seconds -= plan_seconds;
   if (hooks.integrated) hooks.integrated();
   if (hooks.stop_after_integration) {
     stats.voxels_fused = map.live_voxels_per_level();  // brick by brick, within the budget
