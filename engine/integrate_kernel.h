@@ -92,6 +92,16 @@ inline bool insertion_levels(const DepthFrame& f, const std::uint32_t idx[3], co
   return true;
 }
 
+// True if voxel_sample() is sure to reject the voxel at X for lying beyond the ramp, decided
+// without its line of sight: |distance along the ray| = |plane distance| / |cosine| >= |plane
+// distance|, and the floating-point division keeps that order. Saves the square root for the many
+// voxels of an enumeration's bounding slab that lie off the ramp.
+inline bool beyond_ramp(const Eigen::Vector3d& normal, const Eigen::Vector3d& P0, const Eigen::Vector3d& X, double ramp,
+                        const IntegrateOptions& options) {
+  const double plane = normal.dot(P0 - X);  // distance x cosine, cosine < 0 for any voxel accepted
+  return plane > 0 ? plane > ramp * options.behind : -plane > ramp;
+}
+
 // Signed distance and weight of the voxel at X, whose line of sight the triangle (normal, P0)
 // owns with barycentric coordinates `bary`; false if the voxel gets nothing. `dir` is the unit line
 // of sight through X.

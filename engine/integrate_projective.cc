@@ -430,11 +430,11 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               }
               if (level < owner->coarsest || level > owner->level) continue;
               const double ramp = ramp_of[owner->level];
+              const Vector3d P0 = frame.position[owner->idx[0]].cast<double>();
+              if (beyond_ramp(owner->normal, P0, X, ramp, options)) continue;
               const Vector3d dir = (X - centre).normalized();
               VoxelSample v;
-              if (!voxel_sample(frame, owner->idx, owner->normal, frame.position[owner->idx[0]].cast<double>(), bary, X, dir,
-                                ramp, options, &v))
-                continue;
+              if (!voxel_sample(frame, owner->idx, owner->normal, P0, bary, X, dir, ramp, options, &v)) continue;
               std::int64_t idx[3];
               idx[ax] = ia;
               idx[bx] = ib;
