@@ -208,8 +208,10 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
           q = xs.head<2>();
         }
         double bary[3];
-        if (!T.own.owns(T.q, q, bary)) continue;
+        double E[3];
+        if (!T.own.owns(T.q, q, E)) continue;
         if (beyond_ramp(T.normal, T.P[0], X, ramp, options)) continue;
+        T.own.bary(E, bary);
         const Vector3d dir = perspective ? Vector3d((X - centre).normalized()) : axis;
         VoxelSample v;
         if (!voxel_sample(frame, T.idx, T.normal, T.P[0], bary, X, dir, ramp, options, &v)) continue;

@@ -46,15 +46,19 @@ struct Ownership {
     }
     return true;
   }
-  // Barycentric coordinates of p if the triangle owns the line of sight through p.
-  bool owns(const Eigen::Vector2d q[3], const Eigen::Vector2d& p, double bary[3]) const {
+  // True if the triangle owns the line of sight through p; `E` receives the edge functions at p,
+  // from which bary() gives the barycentric coordinates (apart, as most owned voxels of an
+  // enumeration lie off the ramp and never need them).
+  bool owns(const Eigen::Vector2d q[3], const Eigen::Vector2d& p, double E[3]) const {
     for (int e = 0; e < 3; ++e) {
-      const double E = edge(q, lo[e], hi[e], p);
+      E[e] = edge(q, lo[e], hi[e], p);
       const bool positive_side = opp[e] > 0;
-      if (positive_side ? E < 0 : (E > 0 || E == 0)) return false;
-      bary[e] = E / opp[e];
+      if (positive_side ? E[e] < 0 : (E[e] > 0 || E[e] == 0)) return false;
     }
     return true;
+  }
+  void bary(const double E[3], double out[3]) const {
+    for (int e = 0; e < 3; ++e) out[e] = E[e] / opp[e];
   }
 };
 

@@ -404,13 +404,13 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               // or top border, one of the neighbouring quads' (edge functions give a shared edge to
               // one side only).
               const GridTriangle* owner = nullptr;
-              double bary[3] = {0, 0, 0};
+              double E[3] = {0, 0, 0};
               auto try_triangle = [&](std::int32_t t) {
                 if (t < 0 || !tris[t].ok) return false;
                 const GridTriangle& g = tris[t];
                 const Vector2d qv[3] = {frame.image_pos[g.idx[0]].cast<double>(), frame.image_pos[g.idx[1]].cast<double>(),
                                         frame.image_pos[g.idx[2]].cast<double>()};
-                if (!g.own.owns(qv, q, bary)) return false;
+                if (!g.own.owns(qv, q, E)) return false;
                 owner = &g;
                 return true;
               };
@@ -432,6 +432,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               const double ramp = ramp_of[owner->level];
               const Vector3d P0 = frame.position[owner->idx[0]].cast<double>();
               if (beyond_ramp(owner->normal, P0, X, ramp, options)) continue;
+              double bary[3];
+              owner->own.bary(E, bary);
               const Vector3d dir = (X - centre).normalized();
               VoxelSample v;
               if (!voxel_sample(frame, owner->idx, owner->normal, P0, bary, X, dir, ramp, options, &v)) continue;
