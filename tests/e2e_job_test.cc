@@ -324,7 +324,9 @@ TEST(Job, FollowIntegratesDepthMapsAsTheyCompleteInArrivalOrder) {
       ply.flush();
       listed.insert(listed.begin(), conf.scans[i]);
       write_conf(live, conf.camera, listed);
-      std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+      // Long against the settle time: the feed looks only between rounds of integration, which
+      // take longer on a loaded machine.
+      std::this_thread::sleep_for(std::chrono::milliseconds(3000));
       ply.write(bytes.data() + bytes.size() / 2, std::streamsize(bytes.size() - bytes.size() / 2));
       ply.close();
       return;
