@@ -245,7 +245,7 @@ void run_fuse(const FuseArgs& a) {
     write_text_atomically(job.dir() / "config.toml",
                           "# effective configuration of this job (scalefuse resume reads it)\n" + params.assignments());
     if (!a.quiet)
-      std::fprintf(stderr, "job: %s (bricks in memory up to %.2f GiB, checkpoint every %zu depth maps or %.0f s)\n",
+      std::fprintf(stderr, "job: %s (bricks in memory up to %.2f GiB, checkpoint every %zu steps, %.0f s and tile)\n",
                    std::filesystem::absolute(job.dir()).c_str(), double(job_options.memory_limit) / double(1u << 30),
                    job_options.checkpoint_every, job_options.checkpoint_seconds);
     if (!a.quiet)
@@ -323,7 +323,7 @@ void run_fuse(const FuseArgs& a) {
 void add_job_options(CLI::App* cmd, FuseArgs& args) {
   cmd->add_option("--threads", args.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--memory-limit", args.memory_limit, "memory for bricks, e.g. 1.5G (default: a quarter of RAM)");
-  cmd->add_option("--checkpoint-every", args.checkpoint_every, "checkpoint after this many integration steps: depth maps x tiles they reach (default 50)")
+  cmd->add_option("--checkpoint-every", args.checkpoint_every, "checkpoint after this many integration steps, a step being one depth map into one tile (default 200; also at each tile's end)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--checkpoint-seconds", args.checkpoint_seconds, "checkpoint at least this often (default 300 s)")
       ->check(CLI::PositiveNumber);

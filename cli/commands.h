@@ -21,7 +21,7 @@ struct FuseArgs {
   std::string stop_file;                 // --follow ends when it exists (default: JOB/STOP)
   double settle_seconds = 2.0, poll_seconds = 1.0;
   int threads = 0;
-  std::size_t checkpoint_every = 50;
+  std::size_t checkpoint_every = 200;
   double checkpoint_seconds = 300;
   bool quiet = false, print_params = false;
   bool integrate_only = false;           // stop after the integration's checkpoint (resume extracts)

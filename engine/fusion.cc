@@ -365,7 +365,13 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
           break;
         }
         // The tile is complete; no later tile of the sweep touches its bricks.
-        if (map.spills() && !one_tile) map.spill_all();
+        if (map.spills() && !one_tile) {
+          map.spill_all();
+          IntegrationProgress next = progress;
+          ++next.tile;
+          next.tile_frames = 0;
+          if (journal) journal->tile_done(next, map);
+        }
       }
       if (stopped) break;
       progress.integrated = to;

@@ -137,6 +137,9 @@ class FusionJournal {
   virtual void inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) = 0;
   // One more step is done; may spill bricks and commit a checkpoint of `progress`.
   virtual void step_done(const IntegrationProgress& progress, BrickMap& map) = 0;
+  // A tile of a sweep of several is done and its bricks written: a checkpoint costs no more
+  // writes now, and saves redoing the tile.
+  virtual void tile_done(const IntegrationProgress& progress, BrickMap& map) = 0;
   // Integration is complete: the final checkpoint.
   virtual void integrated(const IntegrationProgress& progress, BrickMap& map) = 0;
   // Integration stopped early (FusionHooks::stop): a checkpoint.

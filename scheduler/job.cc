@@ -392,6 +392,11 @@ void Job::step_done(const IntegrationProgress& progress, BrickMap& map) {
   if (options_.term_after > 0 && step == options_.term_after) ::kill(::getpid(), SIGTERM);
 }
 
+void Job::tile_done(const IntegrationProgress& progress, BrickMap& map) {
+  progress_ = progress;
+  checkpoint(map, "integrating");
+}
+
 void Job::integrated(const IntegrationProgress& progress, BrickMap& map) {
   progress_ = progress;
   checkpoint(map, "integrated");

@@ -36,7 +36,7 @@ class JobMismatch : public InputError {
 struct JobOptions {
   std::filesystem::path dir;
   std::size_t memory_limit = std::size_t{1} << 30;  // bytes of resident bricks
-  std::size_t checkpoint_every = 50;                // integration steps (depth maps x tiles they reach)
+  std::size_t checkpoint_every = 200;               // integration steps (depth maps x tiles they reach)
   double checkpoint_seconds = 300;
   // Testing aid: the process kills itself (SIGKILL, no clean-up) once depth maps integrated + steps
   // of the sweep under way reach this, after any checkpoint due at that point. 0 = never.
@@ -76,6 +76,7 @@ class Job : public FusionJournal {
   IntegrationProgress begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) override;
   void inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) override;
   void step_done(const IntegrationProgress& progress, BrickMap& map) override;
+  void tile_done(const IntegrationProgress& progress, BrickMap& map) override;
   void integrated(const IntegrationProgress& progress, BrickMap& map) override;
   void interrupted(const IntegrationProgress& progress, BrickMap& map) override;
   // Records the finished mesh (already written to `mesh`).
