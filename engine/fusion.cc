@@ -297,8 +297,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
         for (std::size_t i = from; i < to; ++i) {
           std::fill(reaches.begin(), reaches.end(), 0);
           for (std::uint64_t id : reach_bricks[i - from]) {
-            const BrickCoord c{std::uint32_t(id & 0x1fffff), std::uint32_t((id >> 21) & 0x1fffff), std::uint32_t(id >> 42)};
-            const std::size_t t = tile_of(progress.tiles, c);
+            const std::size_t t = tile_of(progress.tiles, BrickCoord::unpack(id));
             if (t == progress.tiles.size()) throw std::logic_error("a brick a depth map reaches lies in no tile of the plan");
             reaches[t] = 1;
           }

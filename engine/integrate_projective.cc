@@ -91,6 +91,16 @@ bool is_pixel_centre(const DepthFrame& f, std::uint32_t i) {
   return p.x() == float(i % w) + 0.5f && p.y() == float(i / w) + 0.5f;
 }
 
+// The brick holding world position X (clamped to the grid).
+BrickCoord brick_at(const RootCube& root, int brick_level, const Vector3d& X) {
+  const double bs = root.cell_size(brick_level);
+  const std::int64_t last = (std::int64_t{1} << brick_level) - 1;
+  std::uint32_t c[3];
+  for (int a = 0; a < 3; ++a)
+    c[a] = std::uint32_t(std::clamp<std::int64_t>(std::int64_t(std::floor((X[a] - root.min[a]) / bs)), 0, last));
+  return BrickCoord{c[0], c[1], c[2]};
+}
+
 // A perspective depth map prepared for voxel-centric insertion: its pixel quads, triangles, and
 // per (tile, level) the bounds of the prisms inserted there.
 struct Prepared {
@@ -313,8 +323,6 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
     int tile, level;
   };
   std::vector<Item> items;
-  const double brick_size = root.cell_size(brick_level);
-  const std::int64_t last_brick = (std::int64_t{1} << brick_level) - 1;
   for (int tile = 0; tile < TX * TY; ++tile)
     for (int l = 0; l < L; ++l) {
       if (!has_prisms(p, tile, l)) continue;
@@ -323,13 +331,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
       const double z = 0.5 * (tl.zmin + tl.zmax);
       const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
       const Vector3d X = Rt * (xc - sensor.t);
-      std::uint64_t home = 0;
-      for (int a = 2; a >= 0; --a) {
-        const auto b = std::clamp<std::int64_t>(std::int64_t(std::floor((X[a] - root.min[a]) / brick_size)), 0,
-                                                last_brick);
-        home = (home << 21) | std::uint64_t(b);
-      }
-      items.push_back({home, tile, l});
+      items.push_back({brick_at(root, brick_level, X).packed(), tile, l});
     }
   std::sort(items.begin(), items.end(), [](const Item& a, const Item& b) {
     return a.home != b.home ? a.home < b.home : (a.tile != b.tile ? a.tile < b.tile : a.level < b.level);
@@ -535,20 +537,14 @@ FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>
   } else {
     // Any sensor: per triangle, the bricks of its bounding box widened by its longest ramp (a
     // voxel gets a contribution only within a ramp of its triangle).
-    const std::int64_t last = (std::int64_t{1} << brick_level) - 1;
-    auto coord = [&](const Vector3d& X) {
-      std::uint32_t c[3];
-      for (int a = 0; a < 3; ++a)
-        c[a] = std::uint32_t(std::clamp<std::int64_t>(std::int64_t(std::floor((X[a] - root.min[a]) / bs)), 0, last));
-      return BrickCoord{c[0], c[1], c[2]};
-    };
     for (const FrameTriangle& tri : triangles) {
       int lt = 0, coarsest = 0;
       if (!insertion_levels(frame, tri.data(), root, options, &lt, &coarsest)) continue;
       Eigen::AlignedBox3d box;
       for (std::uint32_t i : tri) box.extend(frame.position[i].cast<double>());
       const double pad = insertion_ramp(options, root, coarsest, lt) + 1e-6 * bs;
-      const BrickCoord lo = coord(box.min() - Vector3d::Constant(pad)), hi = coord(box.max() + Vector3d::Constant(pad));
+      const BrickCoord lo = brick_at(root, brick_level, box.min() - Vector3d::Constant(pad)),
+                       hi = brick_at(root, brick_level, box.max() + Vector3d::Constant(pad));
       if (lo.packed() == hi.packed()) {
         if (reach.bricks.empty() || reach.bricks.back() != lo.packed()) reach.bricks.push_back(lo.packed());
       } else {

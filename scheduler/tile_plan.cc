@@ -27,7 +27,7 @@ std::vector<std::pair<BrickCoord, double>> estimate_brick_bytes(
   }
   for (std::uint64_t id : touched) {
     auto& e = by_brick[id];
-    e.first = BrickCoord{std::uint32_t(id & 0x1fffff), std::uint32_t((id >> 21) & 0x1fffff), std::uint32_t(id >> 42)};
+    e.first = BrickCoord::unpack(id);
   }
   std::vector<std::pair<BrickCoord, double>> out;
   out.reserve(by_brick.size());

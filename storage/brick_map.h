@@ -24,6 +24,9 @@ namespace sf {
 struct BrickCoord {
   std::uint32_t x = 0, y = 0, z = 0;
   std::uint64_t packed() const { return (std::uint64_t(z) << 42) | (std::uint64_t(y) << 21) | x; }
+  static BrickCoord unpack(std::uint64_t id) {
+    return {std::uint32_t(id & 0x1fffff), std::uint32_t((id >> 21) & 0x1fffff), std::uint32_t(id >> 42)};
+  }
 };
 
 // Brick of a voxel for brick level `brick_level`.
