@@ -119,6 +119,66 @@ FrameIdentity identity_of(const FrameSource& source, std::size_t index, const De
   return id;
 }
 
+// The plan of a sweep over depth maps [from, to) (scheduler/tile_plan.h): each depth map's reach
+// and surface cells; unless `progress` carries the job's recorded plan, new tiles cut from the
+// estimated field (recorded in `progress`); returns, per tile, the depth maps whose reach meets
+// it, in input order.
+template <typename LoadFrame>
+std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t to, LoadFrame&& load_frame,
+                                                 const FusionOptions& options, const RootCube& root, const BrickMap& map,
+                                                 const ProgressFn& progress_fn, IntegrationProgress& progress,
+                                                 FusionStats& stats) {
+  const int brick_level = map.brick_level();
+  std::vector<std::vector<std::uint64_t>> reach_bricks(to - from);
+  std::vector<VoxelKey> cells;
+  std::size_t cells_unique = 0, planned = 0;
+  std::mutex cells_mutex;
+  tbb::parallel_for(from, to, [&](std::size_t i) {
+    const DepthFrame f = load_frame(i);
+    FrameReach r = frame_reach(f, triangulate(f, options.triangulate), root, options.integrate, brick_level);
+    reach_bricks[i - from] = std::move(r.bricks);
+    std::lock_guard lock(cells_mutex);
+    cells.insert(cells.end(), r.cells.begin(), r.cells.end());
+    // Overlapping views share most cells: merge as they come, so the list stays near the number
+    // of distinct cells rather than their sum over depth maps.
+    if (cells.size() > 2 * cells_unique + (std::size_t{1} << 20)) {
+      std::sort(cells.begin(), cells.end());
+      cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+      cells_unique = cells.size();
+    }
+    report(progress_fn, "plan", double(++planned), double(to - from));
+  });
+  if (!progress.sweeping()) {
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    std::vector<std::uint64_t> touched;
+    for (const auto& b : reach_bricks) touched.insert(touched.end(), b.begin(), b.end());
+    std::sort(touched.begin(), touched.end());
+    touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+    // 70% of the limit per tile: the estimate is within about 25% on the scenes measured, and the
+    // depth maps in flight need room (the cache spills if a tile outgrows it anyway).
+    const auto estimate = estimate_brick_bytes(cells, brick_level, options.integrate, map.field_bytes(), touched);
+    stats.plan_estimate_bytes = 0;
+    for (const auto& e : estimate) stats.plan_estimate_bytes += e.second;
+    progress.tiles = cut_tiles(estimate, brick_level, 0.7 * double(map.memory_limit()));
+    progress.sweep_end = to;
+    progress.tile = progress.tile_frames = progress.steps = 0;
+  }
+  std::vector<std::vector<std::size_t>> tile_frames(progress.tiles.size());
+  std::vector<char> reaches(progress.tiles.size());
+  for (std::size_t i = from; i < to; ++i) {
+    std::fill(reaches.begin(), reaches.end(), 0);
+    for (std::uint64_t id : reach_bricks[i - from]) {
+      const std::size_t t = tile_of(progress.tiles, BrickCoord::unpack(id));
+      if (t == progress.tiles.size()) throw std::logic_error("a brick a depth map reaches lies in no tile of the plan");
+      reaches[t] = 1;
+    }
+    for (std::size_t t = 0; t < progress.tiles.size(); ++t)
+      if (reaches[t]) tile_frames[t].push_back(i);
+  }
+  return tile_frames;
+}
+
 }  // namespace
 
 Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats_out,
@@ -256,54 +316,12 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
         for (std::size_t i = from; i < to; ++i) tile_frames[0].push_back(i);
       } else {
         const auto plan_start = Clock::now();
-        std::vector<std::vector<std::uint64_t>> reach_bricks(to - from);
-        std::vector<VoxelKey> cells;
-        std::size_t cells_unique = 0;
-        std::mutex cells_mutex;
-        tbb::parallel_for(from, to, [&](std::size_t i) {
-          LateSamples late;
-          const DepthFrame f = load_frame(i, &late);
-          FrameReach r = frame_reach(f, triangulate(f, options.triangulate), root, options.integrate, brick_level);
-          reach_bricks[i - from] = std::move(r.bricks);
-          std::lock_guard lock(cells_mutex);
-          cells.insert(cells.end(), r.cells.begin(), r.cells.end());
-          // Overlapping views share most cells: merge as they come, so the list stays near the
-          // number of distinct cells rather than their sum over depth maps.
-          if (cells.size() > 2 * cells_unique + (std::size_t{1} << 20)) {
-            std::sort(cells.begin(), cells.end());
-            cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-            cells_unique = cells.size();
-          }
-          report(hooks.progress, "plan", double(reads.load()), double(to - from));
-        });
-        if (!progress.sweeping()) {
-          std::sort(cells.begin(), cells.end());
-          cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-          std::vector<std::uint64_t> touched;
-          for (const auto& b : reach_bricks) touched.insert(touched.end(), b.begin(), b.end());
-          std::sort(touched.begin(), touched.end());
-          touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
-          // 70% of the limit per tile: the estimate is within about 25% on the scenes measured, and
-          // the depth maps in flight need room (the cache spills if a tile outgrows it anyway).
-          const auto estimate = estimate_brick_bytes(cells, brick_level, options.integrate, map.field_bytes(), touched);
-          stats.plan_estimate_bytes = 0;
-          for (const auto& e : estimate) stats.plan_estimate_bytes += e.second;
-          progress.tiles = cut_tiles(estimate, brick_level, 0.7 * double(map.memory_limit()));
-          progress.sweep_end = to;
-          progress.tile = progress.tile_frames = progress.steps = 0;
-        }
-        tile_frames.resize(progress.tiles.size());
-        std::vector<char> reaches(progress.tiles.size());
-        for (std::size_t i = from; i < to; ++i) {
-          std::fill(reaches.begin(), reaches.end(), 0);
-          for (std::uint64_t id : reach_bricks[i - from]) {
-            const std::size_t t = tile_of(progress.tiles, BrickCoord::unpack(id));
-            if (t == progress.tiles.size()) throw std::logic_error("a brick a depth map reaches lies in no tile of the plan");
-            reaches[t] = 1;
-          }
-          for (std::size_t t = 0; t < progress.tiles.size(); ++t)
-            if (reaches[t]) tile_frames[t].push_back(i);
-        }
+        tile_frames = plan_sweep(
+            from, to, [&](std::size_t i) {
+              LateSamples late;
+              return load_frame(i, &late);
+            },
+            options, root, map, hooks.progress, progress, stats);
         plan_seconds += std::chrono::duration<double>(Clock::now() - plan_start).count();
       }
       progress.sweep_end = to;

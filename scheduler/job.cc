@@ -161,6 +161,21 @@ std::size_t meta_count(sqlite3* db, const std::string& key, const std::string& w
   return v.empty() ? 0 : std::stoull(v);
 }
 
+// The progress of the last committed checkpoint.
+IntegrationProgress read_progress(sqlite3* db, const std::string& where) {
+  IntegrationProgress p;
+  p.integrated = meta_count(db, "integrated", where);
+  p.sweep_end = std::max(p.integrated, meta_count(db, "sweep_end", where));
+  if (p.sweeping()) {
+    p.tiles = parse_tiles(meta(db, "sweep_tiles", where), where);
+    p.tile = meta_count(db, "sweep_tile", where);
+    p.tile_frames = meta_count(db, "sweep_tile_frames", where);
+    p.steps = meta_count(db, "sweep_steps", where);
+    if (p.tiles.empty() || p.tile > p.tiles.size()) throw InputError(where + ": job journal: inconsistent sweep record");
+  }
+  return p;
+}
+
 // Records depth maps [from, frames.size()) in the inputs table (inside the caller's transaction).
 void insert_inputs(sqlite3* db, const std::vector<FrameIdentity>& frames, std::size_t from, const std::string& where) {
   Statement ins(db, "INSERT INTO inputs(idx, name, size, hash) VALUES(?1, ?2, ?3, ?4)", where);
@@ -341,16 +356,8 @@ IntegrationProgress Job::begin(const std::vector<FrameIdentity>& frames, const R
       throw InputError(store_->path(e.coord, e.generation).string() + ": tile of the last checkpoint is missing");
   store_->remove_all_except(keep);
   map.restore(manifest, std::stoull(meta(db_, "max_generation", where)));
-  progress_.integrated = meta_count(db_, "integrated", where);
-  progress_.sweep_end = std::max(progress_.integrated, meta_count(db_, "sweep_end", where));
-  if (progress_.sweeping()) {
-    progress_.tiles = parse_tiles(meta(db_, "sweep_tiles", where), where);
-    progress_.tile = meta_count(db_, "sweep_tile", where);
-    progress_.tile_frames = meta_count(db_, "sweep_tile_frames", where);
-    progress_.steps = meta_count(db_, "sweep_steps", where);
-    if (progress_.tiles.empty() || progress_.tile > progress_.tiles.size() || progress_.sweep_end > frames.size())
-      throw InputError(where + ": job journal: inconsistent sweep record");
-  }
+  progress_ = read_progress(db_, where);
+  if (progress_.sweep_end > frames.size()) throw InputError(where + ": job journal: inconsistent sweep record");
   return progress_;
 }
 
@@ -424,14 +431,7 @@ JobStatus Job::recorded(const std::filesystem::path& dir, std::string* config) {
     if (st.stage.empty()) st.stage = "new";
     st.input = meta(db, "input", where);
     st.output = meta(db, "output", where);
-    IntegrationProgress p;
-    p.integrated = meta_count(db, "integrated", where);
-    p.sweep_end = std::max(p.integrated, meta_count(db, "sweep_end", where));
-    if (p.sweeping()) {
-      p.tiles = parse_tiles(meta(db, "sweep_tiles", where), where);
-      p.tile = meta_count(db, "sweep_tile", where);
-      p.steps = meta_count(db, "sweep_steps", where);
-    }
+    const IntegrationProgress p = read_progress(db, where);
     st.integrated = p.whole_frames();
     st.sweep_tiles = p.tiles.size();
     st.sweep_tile = p.tile;
