@@ -119,6 +119,12 @@ FrameIdentity identity_of(const FrameSource& source, std::size_t index, const De
   return id;
 }
 
+template <typename T>
+void sort_unique(std::vector<T>& v) {
+  std::sort(v.begin(), v.end());
+  v.erase(std::unique(v.begin(), v.end()), v.end());
+}
+
 // The plan of a sweep over depth maps [from, to) (scheduler/tile_plan.h): each depth map's reach
 // and surface cells; unless `progress` carries the job's recorded plan, new tiles cut from the
 // estimated field (recorded in `progress`); returns, per tile, the depth maps whose reach meets
@@ -142,26 +148,22 @@ std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t t
     // Overlapping views share most cells: merge as they come, so the list stays near the number
     // of distinct cells rather than their sum over depth maps.
     if (cells.size() > 2 * cells_unique + (std::size_t{1} << 20)) {
-      std::sort(cells.begin(), cells.end());
-      cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+      sort_unique(cells);
       cells_unique = cells.size();
     }
     report(progress_fn, "plan", double(++planned), double(to - from));
   });
   if (!progress.sweeping()) {
-    std::sort(cells.begin(), cells.end());
-    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    sort_unique(cells);
     std::vector<std::uint64_t> touched;
     for (const auto& b : reach_bricks) touched.insert(touched.end(), b.begin(), b.end());
-    std::sort(touched.begin(), touched.end());
-    touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+    sort_unique(touched);
     // 70% of the limit per tile: the estimate is within about 25% on the scenes measured, and the
     // depth maps in flight need room (the cache spills if a tile outgrows it anyway).
     const auto estimate = estimate_brick_bytes(cells, brick_level, options.integrate, map.field_bytes(), touched);
     stats.plan_estimate_bytes = 0;
     for (const auto& e : estimate) stats.plan_estimate_bytes += e.second;
     progress.tiles = cut_tiles(estimate, brick_level, 0.7 * double(map.memory_limit()));
-    progress.sweep_end = to;
     progress.tile = progress.tile_frames = progress.steps = 0;
   }
   std::vector<std::vector<std::size_t>> tile_frames(progress.tiles.size());

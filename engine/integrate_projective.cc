@@ -105,7 +105,7 @@ BrickCoord brick_at(const RootCube& root, int brick_level, const Vector3d& X) {
 // per (tile, level) the bounds of the prisms inserted there.
 struct Prepared {
   const DepthFrame* frame = nullptr;
-  int W = 0, QW = 0, QH = 0, TX = 0, TY = 0;
+  int QW = 0, QH = 0, TX = 0, TY = 0;
   std::vector<Quad> quad;
   std::vector<GridTriangle> tris;
   std::vector<TileLevel> tile_levels;  // [tile * L + level]
@@ -122,8 +122,8 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   if (sensor.kind != Sensor::Kind::Perspective || frame.width < 2 || frame.height < 2) return false;
   Prepared& p = *out;
   p.frame = &frame;
-  p.W = frame.width, p.QW = frame.width - 1, p.QH = frame.height - 1;
-  const int W = p.W, QW = p.QW, QH = p.QH;
+  p.QW = frame.width - 1, p.QH = frame.height - 1;
+  const int W = frame.width, QW = p.QW, QH = p.QH;
   p.quad.assign(std::size_t(QW) * std::size_t(QH), Quad{});
   for (std::size_t t = 0; t < triangles.size(); ++t) {
     const FrameTriangle& tri = triangles[t];
