@@ -1,7 +1,7 @@
 // Integration throughput (depth samples per second) on synthetic 640x480 depth maps of a sphere,
 // with 1 and 2 threads in one run so the ratio is meaningful on a noisy machine.
 //   cmake -S . -B build-bench -DSCALEFUSE_BUILD_BENCH=ON && cmake --build build-bench -j2 --target integrate_bench
-//   build-bench/bin/integrate_bench [frames=8] [gamma=4]
+//   build-bench/bin/integrate_bench [frames=8] [gamma=4] [methods=all|voxel|prisms]
 // Compares the voxel-centric enumeration (the default for perspective frames) with the prism
 // enumeration (range grids) on the same frames.
 #include <tbb/task_arena.h>
@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <vector>
 
 #include "engine/depth_frame.h"
@@ -52,6 +53,7 @@ int main(int argc, char** argv) {
   const int frames = argc > 1 ? std::atoi(argv[1]) : 8;
   IntegrateOptions opt;
   if (argc > 2) opt.gamma = std::atof(argv[2]);
+  const std::string only = argc > 3 ? argv[3] : "all";
   std::vector<DepthFrame> views;
   std::vector<std::vector<FrameTriangle>> tris;
   std::size_t samples = 0;
@@ -70,6 +72,7 @@ int main(int argc, char** argv) {
   const Method methods[] = {{"voxel-centric (default)", &integrate_frame}, {"prisms", &integrate_frame_prisms}};
   for (const Method& method : methods)
   for (int threads : {1, 2}) {
+    if (only != "all" && std::string(method.name).rfind(only, 0) != 0) continue;
     std::vector<double> runs;
     std::size_t contributions = 0, voxels = 0;
     for (int rep = 0; rep < 3; ++rep) {

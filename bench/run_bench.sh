@@ -7,13 +7,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 RUNS="${1:-3}"
-BIN=build/bin/scalefuse
+BIN="${BIN:-build/bin/scalefuse}"
 DATA=../shared/data
 WORK="${WORK:-/tmp/scalefuse-bench}"
 mkdir -p "$WORK"
 [ -d "$WORK/igea" ] || $BIN synth "$DATA/meshes/igea_triangles.ply" -o "$WORK/igea" --format colmap -q
 run() {  # name input config
   for i in $(seq "$RUNS"); do
+    rm -rf "$WORK/$1.ply.job"  # a finished job there would only be re-extracted
     $BIN fuse "$2" --config "configs/$3.toml" -o "$WORK/$1.ply" --stats "$WORK/$1.$i.json" -q >/dev/null
   done
   python3 - "$WORK" "$1" "$RUNS" <<'PY'

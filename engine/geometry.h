@@ -1,7 +1,8 @@
 #pragma once
 // Shared geometric vocabulary: the root cube of the primal octree.
 #include <Eigen/Core>
-#include <cmath>
+#include <bit>
+#include <cstdint>
 
 #include "storage/voxel_key.h"
 
@@ -13,7 +14,11 @@ struct RootCube {
   Eigen::Vector3d min = Eigen::Vector3d::Zero();
   double size = 1.0;
 
-  double cell_size(int level) const { return std::ldexp(size, -level); }
+  // size x 2^-level, exact like ldexp but without its libm call: the integration asks for it per
+  // triangle and work item.
+  double cell_size(int level) const {
+    return size * std::bit_cast<double>(std::uint64_t(1023 - level) << 52);
+  }
   Eigen::Vector3d position(VoxelKey k) const {
     const double h = cell_size(k.level());
     return min + h * Eigen::Vector3d(double(k.x()), double(k.y()), double(k.z()));

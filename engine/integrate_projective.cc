@@ -85,10 +85,10 @@ struct HalfSpace {  // m . X >= k
   double k;
 };
 
-bool is_pixel_centre(const DepthFrame& f, std::uint32_t i) {
-  const std::uint32_t w = std::uint32_t(f.width);
+// Sample i lies at row r, column c.
+bool is_pixel_centre(const DepthFrame& f, std::uint32_t i, int r, int c) {
   const Eigen::Vector2f& p = f.image_pos[i];
-  return p.x() == float(i % w) + 0.5f && p.y() == float(i / w) + 0.5f;
+  return p.x() == float(c) + 0.5f && p.y() == float(r) + 0.5f;
 }
 
 // The brick holding world position X (clamped to the grid).
@@ -129,8 +129,9 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     const FrameTriangle& tri = triangles[t];
     int r0 = frame.height, c0 = W, r1 = -1, c1 = -1;
     for (std::uint32_t i : tri) {
-      if (i >= frame.size() || !is_pixel_centre(frame, i)) return false;
-      const int r = int(i / std::uint32_t(W)), c = int(i % std::uint32_t(W));
+      if (i >= frame.size()) return false;
+      const int r = int(i / std::uint32_t(W)), c = int(i - std::uint32_t(r) * std::uint32_t(W));
+      if (!is_pixel_centre(frame, i, r, c)) return false;
       r0 = std::min(r0, r), r1 = std::max(r1, r), c0 = std::min(c0, c), c1 = std::max(c1, c);
     }
     if (r1 - r0 > 1 || c1 - c0 > 1 || r0 >= QH || c0 >= QW) return false;
@@ -368,6 +369,16 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         const double h = root.cell_size(level);
         double ramp_of[L];  // by the owner's level
         for (int lt = level; lt < L; ++lt) ramp_of[lt] = insertion_ramp(options, root, level, lt);
+        // Each half-space, along a column (ib, ic): m . X - k = v0 + ib vb + ic vc + (a - root.min) ma.
+        // The planes carry margins far above the rounding of this affine form.
+        struct ColumnPlane {
+          double v0, vb, vc, ma, inv_ma;
+        };
+        ColumnPlane cp[8];
+        for (int k = 0; k < 8; ++k) {
+          const HalfSpace& hs = fr.planes[k];
+          cp[k] = {hs.m.dot(root.min) - hs.k, hs.m[bx] * h, hs.m[cx] * h, hs.m[ax], hs.m[ax] != 0 ? 1.0 / hs.m[ax] : 0.0};
+        }
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib)
           for (std::int64_t ic = fr.first[cx]; ic <= fr.last[cx]; ++ic) {
             Vector3d base;
@@ -376,17 +387,17 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             base[cx] = root.min[cx] + h * double(ic);
             double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // a0..a1 in index space
             bool empty = false;
-            for (const HalfSpace& hs : fr.planes) {
-              const double v = hs.m.dot(base) - hs.k, ma = hs.m[ax];
-              if (ma == 0) {
+            for (const ColumnPlane& c : cp) {
+              const double v = c.v0 + double(ib) * c.vb + double(ic) * c.vc;
+              if (c.ma == 0) {
                 if (v < 0) {
                   empty = true;
                   break;
                 }
-              } else if (ma > 0) {
-                tmin = std::max(tmin, -v / ma);
+              } else if (c.ma > 0) {
+                tmin = std::max(tmin, -v * c.inv_ma);
               } else {
-                tmax = std::min(tmax, -v / ma);
+                tmax = std::min(tmax, -v * c.inv_ma);
               }
             }
             if (empty || tmin > tmax) continue;

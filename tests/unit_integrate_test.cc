@@ -10,6 +10,7 @@
 #include "engine/error.h"
 #include "engine/hsdf_math.h"
 #include "engine/integrate.h"
+#include "engine/integrate_kernel.h"
 #include "engine/triangulate.h"
 #include "storage/brick_map.h"
 
@@ -280,6 +281,21 @@ namespace sf {
 // voxels with bit-identical distances, weights and colours. The scene is made to stress it: an
 // oblique camera over a wavy surface with a depth step (dropped triangles, levels changing across
 // tiles), confidences and colours, several levels and a tile size that does not divide the image.
+TEST(IntegrateKernel, ColourByteRoundsHalfAwayFromZeroAndClamps) {
+  EXPECT_EQ(integrate_detail::colour_byte(2.5), 3);
+  EXPECT_EQ(integrate_detail::colour_byte(2.4999999999999996), 2);
+  EXPECT_EQ(integrate_detail::colour_byte(0.49999999999999994), 0);  // x + 0.5 would round to 1
+  EXPECT_EQ(integrate_detail::colour_byte(254.5), 255);
+  EXPECT_EQ(integrate_detail::colour_byte(300.0), 255);
+  EXPECT_EQ(integrate_detail::colour_byte(-0.7), 0);
+  EXPECT_EQ(integrate_detail::colour_byte(std::nan("")), 0);
+  // Agrees with clamp(lround) on a fine sweep over [-2, 258], ties included.
+  for (int i = -2000; i <= 258000; ++i) {
+    const double v = i / 1000.0;
+    ASSERT_EQ(integrate_detail::colour_byte(v), std::uint8_t(std::clamp(std::lround(v), 0l, 255l))) << v;
+  }
+}
+
 TEST(Integrate, VoxelCentricEnumerationEqualsPrisms) {
   DepthFrame f;
   f.name = "wavy";

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <random>
 
 #include "engine/geometry.h"
@@ -63,6 +65,16 @@ TEST(RootCube, PositionOfVoxels) {
   EXPECT_DOUBLE_EQ(p.x(), 2.0);
   EXPECT_DOUBLE_EQ(p.y(), 4.0);
   EXPECT_DOUBLE_EQ(p.z(), 11.0);
+}
+
+TEST(RootCube, CellSizeIsExactlyLdexpAtEveryLevel) {
+  for (double size : {1.0, 2.2, 1.7599661946296694, 1e-3, 123.456})
+    for (int level = 0; level <= kMaxLevel; ++level) {
+      const RootCube root{Eigen::Vector3d::Zero(), size};
+      EXPECT_EQ(root.cell_size(level), std::ldexp(size, -level));
+    }
+  const RootCube eight{Eigen::Vector3d::Zero(), 8.0};
+  EXPECT_EQ(eight.cell_size(18), 8.0 / 262144.0);
 }
 
 TEST(VoxelKey, ValidVoxel) {
