@@ -96,6 +96,7 @@ nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
   j["seconds"] = times;
   j["peak_rss_bytes"] = s.peak_rss_bytes;
   j["peak_rss_integrate_bytes"] = s.peak_rss_integrate_bytes;
+  j["peak_rss_regularize_bytes"] = s.peak_rss_regularize_bytes;
   j["spill"] = {{"bricks_spilled", s.spill.spilled}, {"bricks_reloaded", s.spill.reloaded},
                 {"bytes_written", s.spill.bytes_written}, {"bytes_read", s.spill.bytes_read}};
   return j;
@@ -255,7 +256,9 @@ void run_fuse(const FuseArgs& a) {
     FusionHooks hooks;
     hooks.progress = [&](std::string_view stage, double done, double total) { printer(stage, done, total); };
     if (!a.export_vdb.empty())
-      hooks.on_regularized = [&](const BrickMap& map, const RootCube& root) { export_vdb(a.export_vdb, map, root); };
+      hooks.on_regularized = [&](const std::vector<SurfaceVoxel>& voxels, const RootCube& root) {
+        export_vdb(a.export_vdb, voxels, root);
+      };
     // SIGINT/SIGTERM stop the integration after the depth maps in flight, checkpoint, and exit.
     auto stop_signals = std::make_unique<StopSignals>();
     hooks.stop = &g_stop;

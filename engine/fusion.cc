@@ -440,34 +440,33 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     if (stats_out) *stats_out = stats;
     return Mesh{};
   }
-  stage_start = Clock::now();
-  map.load_all();
-  end_stage("load");
-
-  stats.regularize = regularize(map, options.regularize, hooks.progress);
+  // Brick by brick: the raw field is never in memory at once; the survivors are gathered for the
+  // (still global) tetrahedralization.
+  std::vector<SurfaceVoxel> voxels;
+  stats.regularize = regularize_bricks(
+      map, options.regularize, hooks.progress,
+      [&](BrickCoord, std::vector<std::pair<VoxelKey, VoxelData>>&& brick) {
+        for (const auto& [k, v] : brick) {
+          SurfaceVoxel s;
+          s.key = k;
+          s.distance = v.distance;
+          s.weight = v.weight;
+          for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
+          voxels.push_back(s);
+        }
+      });
   for (int l = 0; l <= kMaxLevel; ++l) {
     stats.voxels_fused[l] = stats.regularize.voxels_before[l];
     stats.voxels_regularized[l] = stats.regularize.voxels_after[l];
   }
+  std::sort(voxels.begin(), voxels.end(), [](const SurfaceVoxel& a, const SurfaceVoxel& b) { return a.key < b.key; });
   end_stage("regularize");
+  stats.peak_rss_regularize_bytes = peak_rss_bytes();
   if (hooks.on_regularized) {
-    hooks.on_regularized(map, root);
+    hooks.on_regularized(voxels, root);
     end_stage("export");
   }
-
-  std::vector<SurfaceVoxel> voxels;
-  voxels.reserve(map.voxel_count());
-  for (Brick* b : map.bricks())
-    b->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
-      SurfaceVoxel s;
-      s.key = k;
-      s.distance = v.distance;
-      s.weight = v.weight;
-      for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
-      voxels.push_back(s);
-    });
   map.clear();  // release the field before the tetrahedralization
-  std::sort(voxels.begin(), voxels.end(), [](const SurfaceVoxel& a, const SurfaceVoxel& b) { return a.key < b.key; });
   if (voxels.size() < 4) throw InputError("too few confident voxels to extract a surface (" + std::to_string(voxels.size()) + ")");
   Mesh mesh = extract_surface(voxels, root, options.extract, hooks.progress, &stats.extract);
   end_stage("extract");

@@ -68,7 +68,8 @@ struct FusionStats {
   ExtractStats extract;
   std::vector<StageTime> times;
   std::size_t peak_rss_bytes = 0;
-  std::size_t peak_rss_integrate_bytes = 0;  // peak RSS when integration ended (before the whole field is loaded)
+  std::size_t peak_rss_integrate_bytes = 0;   // peak RSS when integration ended
+  std::size_t peak_rss_regularize_bytes = 0;  // ... when regularization ended (before the tetrahedralization)
   SpillStats spill;                          // bricks spilled to and reloaded from tiles during integration
 };
 
@@ -80,7 +81,7 @@ struct FusionHooks {
   const std::atomic<bool>* stop = nullptr;
   // Called once the integration is complete (and checkpointed): `stop` is not read after this.
   std::function<void()> integrated;
-  std::function<void(const BrickMap&, const RootCube&)> on_regularized;
+  std::function<void(const std::vector<SurfaceVoxel>&, const RootCube&)> on_regularized;
   // fuse --follow: the source grows; fuse() integrates what it holds, then asks the feed for more
   // until the feed ends. The root cube comes from octree.bbox or the depth maps present at the
   // start; later samples outside it are dropped (counted in FusionStats::samples_outside_root).

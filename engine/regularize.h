@@ -6,6 +6,9 @@
 //     regularized and pruned. A voxel whose (blended) weight stays below tau1 is deleted.
 //  2. Fine to coarse: at every position only the finest surviving voxel is kept.
 #include <cstddef>
+#include <functional>
+#include <utility>
+#include <vector>
 
 #include "engine/progress.h"
 #include "storage/brick_map.h"
@@ -30,6 +33,17 @@ struct RegularizeStats {
 // Regularizes `map` in place (erased voxels are compacted away). Parallel in the calling arena;
 // deterministic.
 RegularizeStats regularize(BrickMap& map, const RegularizeOptions& options, const ProgressFn& progress);
+
+// The regularized voxels of one brick, in level then storage order.
+using BrickSink = std::function<void(BrickCoord brick, std::vector<std::pair<VoxelKey, VoxelData>>&& voxels)>;
+
+// The same result voxel for voxel, brick by brick within a small window, so that the field never
+// has to be in memory at once: each brick's field is read twice (once for its face voxels and
+// levels <= the brick level, once to regularize it) and handed to `sink` (called one brick at a
+// time, in no fixed order). Resident bricks are moved out of `map`, spilled ones read from their
+// tiles (which stay). Parallel in the calling arena.
+RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& options, const ProgressFn& progress,
+                                  const BrickSink& sink);
 
 // Interpolates (distance, weight, colour) of the coarser level at voxel `key`'s position; false if a
 // required coarser voxel is missing. Exposed for tests.

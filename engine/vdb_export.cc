@@ -12,12 +12,13 @@ namespace sf {
 
 void initialize_vdb() { openvdb::initialize(); }
 
-void export_vdb(const std::filesystem::path& path, const BrickMap& map, const RootCube& root) {
+void export_vdb(const std::filesystem::path& path, const std::vector<SurfaceVoxel>& voxels, const RootCube& root) {
   std::array<openvdb::FloatGrid::Ptr, kMaxLevel + 1> distance{}, weight{};
   std::array<openvdb::FloatGrid::Accessor*, kMaxLevel + 1> dacc{}, wacc{};
   std::vector<std::unique_ptr<openvdb::FloatGrid::Accessor>> accessors;
-  for (Brick* b : map.bricks()) {
-    b->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+  for (const SurfaceVoxel& v : voxels) {
+    {
+      const VoxelKey k = v.key;
       const int l = k.level();
       if (!distance[l]) {
         char name[32];
@@ -43,7 +44,7 @@ void export_vdb(const std::filesystem::path& path, const BrickMap& map, const Ro
       const openvdb::Coord c(int(k.x()), int(k.y()), int(k.z()));
       dacc[l]->setValue(c, v.distance);
       wacc[l]->setValue(c, v.weight);
-    });
+    }
   }
   openvdb::GridPtrVec grids;
   for (int l = 0; l <= kMaxLevel; ++l)

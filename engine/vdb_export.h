@@ -4,9 +4,10 @@
 // "weight_Lnn" (confidence), with a linear transform so that index (i,j,k) of level l sits at
 // root.min + cell_size(l) * (i,j,k) in world metres.
 #include <filesystem>
+#include <vector>
 
 #include "engine/geometry.h"
-#include "storage/brick_map.h"
+#include "engine/extract/extract.h"
 
 namespace sf {
 
@@ -14,6 +15,6 @@ namespace sf {
 void initialize_vdb();
 
 // Writes to a temporary file beside `path`, then renames it into place.
-void export_vdb(const std::filesystem::path& path, const BrickMap& map, const RootCube& root);
+void export_vdb(const std::filesystem::path& path, const std::vector<SurfaceVoxel>& voxels, const RootCube& root);
 
 }  // namespace sf

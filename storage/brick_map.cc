@@ -138,18 +138,31 @@ void BrickMap::attach_store(const TileStore* store, std::size_t memory_limit) {
 
 std::size_t BrickMap::resident_bytes() const { return std::size_t(std::max<std::int64_t>(0, resident_bytes_.load())); }
 
+const VoxelTable& BrickMap::field_of(const Brick& b, VoxelTable& scratch) const {
+  if (b.resident) return b.voxels;
+  scratch.clear();
+  store_->read(b.coord, b.generation, scratch);
+  return scratch;
+}
+
+VoxelTable BrickMap::take_field(Brick& b) {
+  std::lock_guard lock(b.mutex);
+  VoxelTable out(brick_level_);
+  if (!b.resident) {
+    store_->read(b.coord, b.generation, out);
+    return out;
+  }
+  resident_bytes_ -= std::int64_t(b.voxels.memory_bytes());
+  std::swap(out, b.voxels);
+  resident_bytes_ += std::int64_t(b.voxels.memory_bytes());
+  return out;
+}
+
 std::array<std::size_t, kMaxLevel + 1> BrickMap::live_voxels_per_level() const {
   std::array<std::size_t, kMaxLevel + 1> n{};
   VoxelTable scratch(brick_level_);
-  for (Brick* b : bricks()) {
-    const VoxelTable* table = &b->voxels;
-    if (!b->resident) {
-      scratch.clear();
-      store_->read(b->coord, b->generation, scratch);
-      table = &scratch;
-    }
-    table->for_each([&](VoxelKey k, const VoxelData&) { ++n[std::size_t(k.level())]; });
-  }
+  for (Brick* b : bricks())
+    field_of(*b, scratch).for_each([&](VoxelKey k, const VoxelData&) { ++n[std::size_t(k.level())]; });
   return n;
 }
 

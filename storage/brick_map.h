@@ -147,6 +147,12 @@ class BrickMap {
   void restore(const std::vector<ManifestEntry>& manifest, std::uint64_t max_generation);
   // Makes every brick resident (for stages that do not page yet: regularization, extraction).
   void load_all();
+  // A brick's voxels to read: its table if resident, else its tile read into `scratch`. Not safe
+  // concurrently with spilling or loading that brick.
+  const VoxelTable& field_of(const Brick& b, VoxelTable& scratch) const;
+  // A brick's voxels, taken out of memory (a resident brick is left empty) or read from its tile
+  // (which stays): for a stage that consumes the field brick by brick.
+  VoxelTable take_field(Brick& b);
   std::size_t resident_bytes() const;
   // Live voxels per octree level over every brick, reading spilled bricks' tiles one at a time
   // into a scratch table (memory: one brick). Not safe concurrently with any other access.

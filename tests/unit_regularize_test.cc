@@ -3,7 +3,14 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <random>
 #include <set>
+
+#include "storage/tile_store.h"
+#include "test_util.h"
 
 namespace sf {
 namespace {
@@ -68,6 +75,80 @@ TEST(Regularize, DuplicatesAcrossSeveralLevelsKeepTheFinest) {
   regularize(m, {0.0, 0.0}, {});
   EXPECT_EQ(m.find(VoxelKey::make(0, 1, 1, 1)), nullptr);
   EXPECT_NE(m.find(VoxelKey::make(3, 8, 8, 8)), nullptr);
+}
+
+namespace {
+// A field over levels 0..7 around a sphere, dense enough that most voxels find their coarser
+// neighbours, with weights spread over [0, 1.2) so that voxels are blended, deleted for lack of
+// confidence and removed as duplicates at every level, brick corners and faces included.
+void fill_shell(BrickMap& m, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  std::vector<Contribution> batch;
+  for (int l = 0; l <= 7; ++l) {
+    const std::uint32_t n = 1u << l;
+    for (std::uint32_t z = 0; z <= n; ++z)
+      for (std::uint32_t y = 0; y <= n; ++y)
+        for (std::uint32_t x = 0; x <= n; ++x) {
+          const double px = double(x) / n - 0.5, py = double(y) / n - 0.45, pz = double(z) / n - 0.55;
+          const double r = std::sqrt(px * px + py * py + pz * pz) - 0.3;
+          if (std::abs(r) > 3.0 / n + 0.02 || u(rng) < 0.1f) continue;
+          Contribution c{VoxelKey::make(l, x, y, z), float(r), 1.2f * u(rng), {0, 0, 0}, true};
+          for (auto& ch : c.colour) ch = std::uint8_t(255 * u(rng));
+          batch.push_back(c);
+        }
+  }
+  m.apply(batch);
+}
+
+std::map<std::uint64_t, VoxelData> field_of(const BrickMap& m) {
+  std::map<std::uint64_t, VoxelData> out;
+  for (Brick* b : m.bricks()) b->voxels.for_each([&](VoxelKey k, const VoxelData& v) { out[k.bits] = v; });
+  return out;
+}
+}  // namespace
+
+TEST(Regularize, BrickByBrickEqualsTheWholeFieldBitForBit) {
+  BrickMap reference(0);
+  fill_shell(reference, 7);
+  const RegularizeOptions opt;  // τ0 = 0.5, τ1 = 0.1
+  const RegularizeStats want = regularize(reference, opt, {});
+  const auto expected = field_of(reference);
+  ASSERT_GT(want.blended, 1000u);
+  ASSERT_GT(want.deleted_unconfident, 100u);
+  ASSERT_GT(want.deleted_duplicates, 1000u);
+  const auto dir = test::scratch_dir("regularize-bricks");
+  for (int brick_level : {0, 1, 2, 3, 5})
+    for (bool spilled : {false, true}) {
+      SCOPED_TRACE("brick level " + std::to_string(brick_level) + (spilled ? ", spilled" : ", in memory"));
+      BrickMap m(brick_level);
+      TileStore store(dir / ("tiles" + std::to_string(brick_level)));
+      if (spilled) m.attach_store(&store, 1);
+      fill_shell(m, 7);
+      if (spilled) m.spill_all();
+      std::map<std::uint64_t, VoxelData> got;
+      std::set<std::uint64_t> bricks_seen;
+      const RegularizeStats st = regularize_bricks(m, opt, {}, [&](BrickCoord c, std::vector<std::pair<VoxelKey, VoxelData>>&& v) {
+        EXPECT_TRUE(bricks_seen.insert(c.packed()).second);
+        for (const auto& [k, d] : v) {
+          EXPECT_EQ(brick_of(k, brick_level).packed(), c.packed());
+          got[k.bits] = d;
+        }
+      });
+      ASSERT_EQ(got.size(), expected.size());
+      for (const auto& [k, v] : expected) {
+        const auto it = got.find(k);
+        ASSERT_NE(it, got.end()) << VoxelKey{k}.level();
+        ASSERT_EQ(std::memcmp(&it->second, &v, sizeof v), 0) << "level " << VoxelKey{k}.level();
+      }
+      EXPECT_EQ(st.blended, want.blended);
+      EXPECT_EQ(st.deleted_unconfident, want.deleted_unconfident);
+      EXPECT_EQ(st.deleted_duplicates, want.deleted_duplicates);
+      for (int l = 0; l <= kMaxLevel; ++l) {
+        EXPECT_EQ(st.voxels_before[l], want.voxels_before[l]);
+        EXPECT_EQ(st.voxels_after[l], want.voxels_after[l]);
+      }
+    }
 }
 
 TEST(BrickMap, BrickOfVoxelsOfAllLevels) {
