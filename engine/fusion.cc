@@ -60,6 +60,7 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
   s.add("extract.snap_fraction", &o.extract.snap_fraction, "edge", "vertex snapping distance (7.2); 0 = off");
   s.add("extract.min_component_triangles", &o.extract.min_component_triangles, "triangles",
         "remove connected components smaller than this; 0 = keep all");
+  s.add("extract.mode", &o.extract.mode, "", "global: one Delaunay tetrahedralization | bricks: per brick window (same mesh)");
   s.add("extract.parallel_min_voxels", &o.extract.parallel_min_voxels, "voxels",
         "use CGAL's parallel Delaunay insertion from this many voxels (with > 1 thread)");
   s.add("octree.bbox", &o.octree.bbox, "m", "clip box xmin,ymin,zmin,xmax,ymax,zmax; empty = data bounds");
@@ -468,7 +469,9 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   }
   map.clear();  // release the field before the tetrahedralization
   if (voxels.size() < 4) throw InputError("too few confident voxels to extract a surface (" + std::to_string(voxels.size()) + ")");
-  Mesh mesh = extract_surface(voxels, root, options.extract, hooks.progress, &stats.extract);
+  ExtractOptions extract = options.extract;
+  if (extract.mode == "bricks") extract.brick_level = map.brick_level();
+  Mesh mesh = extract_surface(voxels, root, extract, hooks.progress, &stats.extract);
   end_stage("extract");
   stats.peak_rss_bytes = peak_rss_bytes();
   if (stats_out) *stats_out = stats;

@@ -117,6 +117,27 @@ TEST(CliBadInput, TruncatedMveiAndBadParameters) {
   expect_bad_input(fuse(root / "scene", out, "--config " + (root / "bad.toml").string()), out, "bad.toml");
 }
 
+TEST(CliValidScene, ExtractionByBricksGivesTheGlobalMeshOnTheRealBunny) {
+  // The ten real scans: a brick boundary runs through the ears and the body; windows hold cells
+  // that are not global (a voxel outside the window inside their sphere), which the certificate
+  // rejects.
+  const fs::path root = test::scratch_dir("cli-extract-bricks");
+  const fs::path scans = test::shared_data() / "stanford_bunny" / "scans";
+  const std::string config = " --config " + (fs::path(SCALEFUSE_SOURCE_DIR) / "configs" / "laser.toml").string();
+  const fs::path global = root / "global.ply", bricks = root / "bricks.ply", stats = root / "bricks.json";
+  ASSERT_EQ(fuse(scans, global, config + " --extract global").code, 0);
+  const CliRun r = fuse(scans, bricks, config + " --extract bricks --stats " + stats.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::ifstream a(global, std::ios::binary), b(bricks, std::ios::binary);
+  const std::string ga((std::istreambuf_iterator<char>(a)), {}), gb((std::istreambuf_iterator<char>(b)), {});
+  EXPECT_GT(ga.size(), 1000000u);
+  EXPECT_TRUE(ga == gb) << "the per-brick mesh differs from the global one";
+  const auto j = nlohmann::json::parse(std::ifstream(stats));
+  EXPECT_GT(j["extract"]["windows"].get<int>(), 100);
+  EXPECT_GT(j["extract"]["window_cells_rejected"].get<int>(), 0);
+  EXPECT_EQ(fuse(scans, root / "bad.ply", config + " --extract sideways").code, 2);
+}
+
 TEST(CliValidScene, WritesMeshStatsAndVdb) {
   const fs::path root = test::scratch_dir("cli-valid");
   std::string log;

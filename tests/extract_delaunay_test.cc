@@ -72,6 +72,52 @@ TEST(ExtractDelaunay, FullLatticeIsPositivelyOrientedAndFillsTheCube) {
   EXPECT_LE(cells, 6u * 125u);
 }
 
+TEST(ExtractDelaunay, PerturbedInSphereAgreesWithTheTriangulation) {
+  // A 4x4x4 lattice (every cube's corners cospherical) plus a coarser level's points: every cell
+  // of the triangulation has every other point outside its sphere under the symbolic
+  // perturbation, which decides many points lying exactly on it; a cell that is not Delaunay has
+  // a point inside.
+  std::vector<LatticePoint> p;
+  for (VoxelKey k : lattice(5, 4, 10)) p.push_back(lattice_point(k));
+  for (VoxelKey k : lattice(4, 3, 4)) p.push_back({2 * std::int32_t(k.x()), 2 * std::int32_t(k.y()), 2 * std::int32_t(k.z())});
+  std::sort(p.begin(), p.end());
+  p.erase(std::unique(p.begin(), p.end()), p.end());
+  const DelaunayTetrahedralization dt(p, false, nullptr);
+  std::size_t on_sphere = 0, cells = 0;
+  dt.for_each_cell([&](const Tet& t) {
+    ++cells;
+    const LatticePoint* c[4] = {&p[t[0]], &p[t[1]], &p[t[2]], &p[t[3]]};
+    EXPECT_GT(extract_detail::lattice_orientation(*c[0], *c[1], *c[2], *c[3]), 0);
+    Eigen::Vector3d centre;  // to count the degenerate tests
+    {
+      Eigen::Matrix3d a;
+      Eigen::Vector3d b;
+      for (int r = 0; r < 3; ++r) {
+        for (int k = 0; k < 3; ++k) a(r, k) = 2.0 * ((*c[r + 1])[k] - (*c[0])[k]);
+        double n1 = 0, n0 = 0;
+        for (int k = 0; k < 3; ++k) {
+          n1 += double((*c[r + 1])[k]) * (*c[r + 1])[k];
+          n0 += double((*c[0])[k]) * (*c[0])[k];
+        }
+        b(r) = n1 - n0;
+      }
+      centre = a.colPivHouseholderQr().solve(b);
+    }
+    const double r2 = (Eigen::Vector3d((*c[0])[0], (*c[0])[1], (*c[0])[2]) - centre).squaredNorm();
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (i == t[0] || i == t[1] || i == t[2] || i == t[3]) continue;
+      if (std::abs((Eigen::Vector3d(p[i][0], p[i][1], p[i][2]) - centre).squaredNorm() - r2) < 1e-6) ++on_sphere;
+      ASSERT_LT(extract_detail::lattice_side_of_sphere(c, p[i]), 0) << "cell " << cells << ", point " << i;
+    }
+  });
+  EXPECT_GT(on_sphere, 100u) << "degenerate cases are the normal case on a lattice";
+  // The cube spanned by three far corners of the fine lattice holds lattice points inside.
+  const LatticePoint a{10, 10, 10}, b{13, 10, 10}, c{10, 13, 10}, d{10, 10, 13}, inner{11, 11, 11};
+  const LatticePoint* big[4] = {&a, &b, &c, &d};
+  ASSERT_GT(extract_detail::lattice_orientation(a, b, c, d), 0);
+  EXPECT_GT(extract_detail::lattice_side_of_sphere(big, inner), 0);
+}
+
 TEST(ExtractDelaunay, UniqueOnLatticeSubsets) {
   // A 6x6x6 lattice with a third of the points removed (holes make many different cospherical
   // configurations), and a larger 16^3 one for the parallel insertion to have work.

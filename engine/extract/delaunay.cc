@@ -205,6 +205,36 @@ void DelaunayTetrahedralization::for_each_cell(const std::function<void(const Te
   });
 }
 
+namespace {
+Point point_of(const LatticePoint& p) { return Point(double(p[0]), double(p[1]), double(p[2])); }
+}  // namespace
+
+int lattice_orientation(const LatticePoint& p, const LatticePoint& q, const LatticePoint& r, const LatticePoint& s) {
+  return int(LatticeTraits::Orientation_3()(point_of(p), point_of(q), point_of(r), point_of(s)));
+}
+
+int lattice_side_of_sphere(const LatticePoint* cell[4], const LatticePoint& t) {
+  const Point p[4] = {point_of(*cell[0]), point_of(*cell[1]), point_of(*cell[2]), point_of(*cell[3])};
+  const Point q = point_of(t);
+  const CGAL::Oriented_side os = LatticeTraits::Side_of_oriented_sphere_3()(p[0], p[1], p[2], p[3], q);
+  if (os != CGAL::ON_ORIENTED_BOUNDARY) return int(os);
+  // Delaunay_triangulation_3::side_of_oriented_sphere with perturb = true: sort the five points
+  // lexicographically; the largest decides, by the orientation with it replaced by t.
+  const Point* order[5] = {&p[0], &p[1], &p[2], &p[3], &q};
+  const LatticeTraits::Compare_xyz_3 compare;
+  std::sort(order, order + 5, [&](const Point* a, const Point* b) { return compare(*a, *b) == CGAL::SMALLER; });
+  const LatticeTraits::Orientation_3 orientation;
+  for (int i = 4; i > 2; --i) {
+    if (order[i] == &q) return -1;  // ON_NEGATIVE_SIDE
+    CGAL::Orientation o = CGAL::COPLANAR;
+    if (order[i] == &p[3] && (o = orientation(p[0], p[1], p[2], q)) != CGAL::COPLANAR) return int(o);
+    if (order[i] == &p[2] && (o = orientation(p[0], p[1], q, p[3])) != CGAL::COPLANAR) return int(o);
+    if (order[i] == &p[1] && (o = orientation(p[0], q, p[2], p[3])) != CGAL::COPLANAR) return int(o);
+    if (order[i] == &p[0] && (o = orientation(q, p[1], p[2], p[3])) != CGAL::COPLANAR) return int(o);
+  }
+  return -1;  // unreachable for a positively oriented cell (CGAL asserts)
+}
+
 std::vector<Tet> delaunay_tetrahedra(const std::vector<LatticePoint>& points, bool parallel) {
   std::vector<Tet> cells;
   {

@@ -54,6 +54,13 @@ class DelaunayTetrahedralization {
   std::unique_ptr<Impl> impl_;
 };
 
+// The triangulation's own exact predicates on lattice points, for certifying its cells elsewhere.
+// Sign of det[q - p, r - p, s - p] (positive: s sees p, q, r counterclockwise).
+int lattice_orientation(const LatticePoint& p, const LatticePoint& q, const LatticePoint& r, const LatticePoint& s);
+// For a positively oriented cell: +1 if t is inside its circumsphere, -1 if outside, decided on
+// the sphere by CGAL's symbolic perturbation exactly as Delaunay_triangulation_3 does (so never 0).
+int lattice_side_of_sphere(const LatticePoint* cell[4], const LatticePoint& t);
+
 // All finite cells, each rotated by an even permutation so that its smallest index comes first,
 // sorted. For tests and tools: the full list costs 16 bytes per cell.
 std::vector<Tet> delaunay_tetrahedra(const std::vector<LatticePoint>& points, bool parallel);

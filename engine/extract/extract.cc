@@ -34,16 +34,21 @@
 #include <string>
 
 #include "engine/error.h"
+#include "engine/extract/certificate.h"
 #include "engine/extract/delaunay.h"
 #include "engine/extract/marching_tets.h"
 
 namespace sf {
 
+using extract_detail::Ball;
+using extract_detail::Certificate;
 using extract_detail::crossing_fraction;
 using extract_detail::DelaunayTetrahedralization;
 using extract_detail::FieldView;
 using extract_detail::MtTriangle;
 using extract_detail::MtVertex;
+using extract_detail::Occupancy;
+using extract_detail::Outsiders;
 using extract_detail::Tet;
 
 void ExtractOptions::check() const {
@@ -54,6 +59,11 @@ void ExtractOptions::check() const {
     std::ostringstream s;
     s << "extract: snap fraction must be in [0, 0.5), got " << snap_fraction << " (0 turns snapping off)";
     throw InputError(s.str());
+  }
+  if (mode != "global" && mode != "bricks") throw InputError("extract: mode must be global or bricks, got '" + mode + "'");
+  if (brick_level < -1 || brick_level > kMaxLevel) {
+    throw InputError("extract: brick level must be -1 (global) or in [0, " + std::to_string(kMaxLevel) + "], got " +
+                     std::to_string(brick_level));
   }
 }
 
@@ -240,6 +250,189 @@ Candidates candidate_cells(const Voxels& v, const ExtractOptions& options, const
     out.mixed.insert(out.mixed.end(), l.c.mixed.begin(), l.c.mixed.end());
     out.negative_only.insert(out.negative_only.end(), l.c.negative_only.begin(), l.c.negative_only.end());
     l.c = Candidates();  // release as we go
+  }
+  return out;
+}
+
+// Brick by brick (options.brick_level = B >= 0). Each voxel belongs to the brick of its position.
+// A cell is owned by its coarsest vertex (ties: the lowest key), and by that vertex's brick X. By
+// 7.1 every other vertex v of a kept cell lies within h(owner) + n h(v) <= (1 + n) h(Lmin(X)) of
+// the owner per axis, Lmin(X) being the coarsest level in X. So the window of X, every voxel
+// within that reach of X's closed box, holds all four vertices of each kept cell X owns, and a
+// cell of the global triangulation with its vertices in the window is a cell of the window's
+// triangulation (its circumsphere is empty of every voxel, so of the window's; CGAL's symbolic
+// perturbation depends on the five points of a test alone). Conversely a cell of the window is a
+// global cell when its closed circumball holds no voxel outside the window: certified if the ball
+// lies strictly between the lattice planes next to the window's faces. A window with an owned
+// candidate cell that fails the certificate is redone with twice the reach (at worst the whole
+// field, where every cell is global). The union of the owned, kept, candidate cells is then
+// exactly the global one.
+
+Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& options, ExtractStats* st) {
+  using extract_detail::LatticePoint;
+  const int B = options.brick_level, n = options.neighbourhood_n;
+  int finest = 0, coarsest = kMaxLevel;
+  for (VoxelKey k : v.key) {
+    finest = std::max(finest, k.level());
+    coarsest = std::min(coarsest, k.level());
+  }
+  // Lattice of the finer of the finest level and the brick level, so that bricks are whole
+  // lattice cells (a uniform scaling: the same Delaunay complex as the global path's lattice).
+  const int G = std::max(finest, B);
+  const std::int64_t side = std::int64_t{1} << G, brick_side = std::int64_t{1} << (G - B);
+  std::vector<LatticePoint> lattice(v.size());
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_brick(v.size());  // (brick id, voxel)
+  const auto brick_id = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+    return (std::uint64_t(z) << 40) | (std::uint64_t(y) << 20) | std::uint64_t(x);
+  };
+  const std::int64_t last_brick = (std::int64_t{1} << B) - 1;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, v.size()), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const VoxelKey k = v.key[i];
+      const int shift = G - k.level();
+      lattice[i] = {std::int32_t(k.x()) << shift, std::int32_t(k.y()) << shift, std::int32_t(k.z()) << shift};
+      std::int64_t b[3];
+      for (int a = 0; a < 3; ++a) b[a] = std::min<std::int64_t>(lattice[i][a] / brick_side, last_brick);
+      by_brick[i] = {brick_id(b[0], b[1], b[2]), std::uint32_t(i)};
+    }
+  });
+  tbb::parallel_sort(by_brick.begin(), by_brick.end());
+  Occupancy occ;
+  occ.side = std::max<std::int64_t>(1, brick_side / 16);
+  occ.cells.resize(v.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, v.size()), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i)
+      occ.cells[i] = Occupancy::pack(lattice[i][0] / occ.side, lattice[i][1] / occ.side, lattice[i][2] / occ.side);
+  });
+  tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
+  occ.cells.erase(std::unique(occ.cells.begin(), occ.cells.end()), occ.cells.end());
+  occ.cells.shrink_to_fit();
+  std::vector<std::size_t> starts;  // first entry of each brick in by_brick
+  for (std::size_t i = 0; i < by_brick.size(); ++i)
+    if (i == 0 || by_brick[i].first != by_brick[i - 1].first) starts.push_back(i);
+  starts.push_back(by_brick.size());
+  const auto find_brick = [&](std::uint64_t id) -> std::pair<std::size_t, std::size_t> {
+    const auto it = std::lower_bound(by_brick.begin(), by_brick.end(), std::pair<std::uint64_t, std::uint32_t>{id, 0});
+    if (it == by_brick.end() || it->first != id) return {0, 0};
+    auto end = it;
+    while (end != by_brick.end() && end->first == id) ++end;
+    return {std::size_t(it - by_brick.begin()), std::size_t(end - by_brick.begin())};
+  };
+
+  struct Local {
+    Candidates c;
+    std::size_t tetrahedra = 0, kept = 0, windows = 0, points = 0, regrown = 0, rejected = 0;
+  };
+  tbb::enumerable_thread_specific<Local> locals;
+  tbb::parallel_for(std::size_t(0), starts.size() - 1, [&](std::size_t bi) {
+    Local& local = locals.local();
+    const std::uint64_t id = by_brick[starts[bi]].first;
+    const std::int64_t X[3] = {std::int64_t(id & 0xFFFFF), std::int64_t((id >> 20) & 0xFFFFF), std::int64_t(id >> 40)};
+    int lmin = kMaxLevel;
+    for (std::size_t i = starts[bi]; i < starts[bi + 1]; ++i) lmin = std::min(lmin, v.key[by_brick[i].second].level());
+    std::int64_t reach = (1 + n) * (std::int64_t{1} << (G - lmin));
+    for (;;) {
+      // The window: every voxel within `reach` of X's closed box (clipped to the lattice).
+      std::int64_t lo[3], hi[3], blo[3], bhi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::max<std::int64_t>(0, X[a] * brick_side - reach);
+        hi[a] = std::min<std::int64_t>(side, (X[a] + 1) * brick_side + reach);
+        blo[a] = std::min(lo[a] / brick_side, last_brick);
+        bhi[a] = std::min(hi[a] / brick_side, last_brick);
+      }
+      // Gathered: the window's bricks and one more layer, whose other voxels certify exactly.
+      std::int64_t glo[3], ghi[3];
+      for (int a = 0; a < 3; ++a) {
+        blo[a] = std::max<std::int64_t>(0, blo[a] - 1);
+        bhi[a] = std::min(bhi[a] + 1, last_brick);
+        glo[a] = blo[a] == 0 ? std::int64_t{-1} << 40 : blo[a] * brick_side;
+        ghi[a] = bhi[a] == last_brick ? std::int64_t{1} << 40 : (bhi[a] + 1) * brick_side - 1;
+      }
+      std::vector<std::uint32_t> members;
+      Outsiders outsiders;
+      for (std::int64_t z = blo[2]; z <= bhi[2]; ++z)
+        for (std::int64_t y = blo[1]; y <= bhi[1]; ++y)
+          for (std::int64_t x = blo[0]; x <= bhi[0]; ++x) {
+            const auto [b, e] = find_brick(brick_id(x, y, z));
+            for (std::size_t i = b; i < e; ++i) {
+              const LatticePoint& p = lattice[by_brick[i].second];
+              if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
+                members.push_back(by_brick[i].second);
+              else
+                outsiders.points.push_back({Occupancy::pack(p[0] / occ.side, p[1] / occ.side, p[2] / occ.side), p});
+            }
+          }
+      std::sort(outsiders.points.begin(), outsiders.points.end());
+      std::sort(members.begin(), members.end());  // local index order = key order
+      std::vector<LatticePoint> points(members.size());
+      for (std::size_t i = 0; i < members.size(); ++i) points[i] = lattice[members[i]];
+      const bool whole = lo[0] == 0 && lo[1] == 0 && lo[2] == 0 && hi[0] == side && hi[1] == side && hi[2] == side;
+      Local mine;
+      bool certified = true;
+      {
+        const DelaunayTetrahedralization dt(points, false, nullptr);
+        dt.for_each_cell([&](const Tet& local_cell) {
+          if (!certified) return;
+          Tet t;
+          int owner = 0;
+          for (int k = 0; k < 4; ++k) {
+            t[k] = members[local_cell[k]];
+            const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
+            if (lk < lo_ || (lk == lo_ && t[k] < t[owner])) owner = k;
+          }
+          const LatticePoint& o = lattice[t[owner]];
+          for (int a = 0; a < 3; ++a)
+            if (std::min<std::int64_t>(o[a] / brick_side, last_brick) != X[a]) return;
+          ++mine.tetrahedra;
+          if (!keep_cell(t, v, n)) return;
+          ++mine.kept;
+          const std::array<float, 4> d = cell_distances(t, v.distance);
+          if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0)) return;
+          const LatticePoint* corners[4] = {&points[local_cell[0]], &points[local_cell[1]], &points[local_cell[2]],
+                                            &points[local_cell[3]]};
+          if (!whole) {
+            Ball ball;
+            const Certificate c = circumball(corners, &ball) ? certify(ball, corners, lo, hi, glo, ghi, outsiders, occ)
+                                                             : Certificate::kUnknown;
+            if (c == Certificate::kNotGlobal) {
+              ++mine.rejected;
+              return;
+            }
+            if (c == Certificate::kUnknown) {
+              certified = false;
+              return;
+            }
+          }
+          const bool positive = d[0] > 0 || d[1] > 0 || d[2] > 0 || d[3] > 0;
+          (positive ? mine.c.mixed : mine.c.negative_only).push_back(t);
+        });
+      }
+      ++local.windows;
+      local.points += points.size();
+      if (!certified) {
+        ++local.regrown;
+        reach *= 2;
+        continue;
+      }
+      local.tetrahedra += mine.tetrahedra;
+      local.kept += mine.kept;
+      local.rejected += mine.rejected;
+      local.c.mixed.insert(local.c.mixed.end(), mine.c.mixed.begin(), mine.c.mixed.end());
+      local.c.negative_only.insert(local.c.negative_only.end(), mine.c.negative_only.begin(), mine.c.negative_only.end());
+      break;
+    }
+  });
+  Candidates out;
+  for (Local& l : locals) {
+    st->tetrahedra += l.tetrahedra;
+    st->kept_tetrahedra += l.kept;
+    st->windows += l.windows;
+    st->window_points += l.points;
+    st->windows_regrown += l.regrown;
+    st->window_cells_rejected += l.rejected;
+    out.mixed.insert(out.mixed.end(), l.c.mixed.begin(), l.c.mixed.end());
+    out.negative_only.insert(out.negative_only.end(), l.c.negative_only.begin(), l.c.negative_only.end());
+    l.c = Candidates();
   }
   return out;
 }
@@ -508,7 +701,8 @@ Mesh extract_surface(const std::vector<SurfaceVoxel>& voxels, const RootCube& ro
   Voxels v = prepare(voxels, root, &st);
   st.voxels = v.size();
 
-  Candidates cells = candidate_cells(v, options, progress, &st);
+  Candidates cells = options.brick_level >= 0 ? candidate_cells_by_brick(v, options, &st)
+                                              : candidate_cells(v, options, progress, &st);
   report(progress, "extract", 0, kStages);
   st.snapped_voxels = snap_voxels(v, cells.mixed, options.snap_fraction);
   report(progress, "extract", 1, kStages);

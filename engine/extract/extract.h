@@ -36,6 +36,7 @@
 //   whole mesh even where snapping moved vertices.
 #include <array>
 #include <cstddef>
+#include <string>
 #include <vector>
 
 #include "engine/geometry.h"
@@ -61,6 +62,12 @@ struct ExtractOptions {
   // arena has more than one thread and there are at least this many voxels. The triangulation is
   // the same either way; 0 = parallel whenever the arena allows it.
   std::size_t parallel_min_voxels = 20000;
+  // "global" | "bricks": the fusion sets brick_level to its field's brick level for "bricks".
+  std::string mode = "global";
+  // >= 0: tetrahedralize brick by brick (bricks of this octree level, windows in parallel) instead
+  // of at once; the kept cells, and so the mesh, are the same (see candidate cells below). -1: one
+  // global triangulation.
+  int brick_level = -1;
   void check() const;             // throws InputError on a bad value
 };
 
@@ -75,6 +82,13 @@ struct ExtractStats {
   std::size_t coincident_voxels = 0;
   // Zero faces with negative voxels on both sides (inside the solid), emitted by neither side.
   std::size_t interior_zero_faces = 0;
+  // Brick by brick: windows triangulated, points triangulated over all windows (each voxel is
+  // in its own brick's window and in the halos of some others), windows redone with a wider halo
+  // because a cell's circumsphere reached beyond the window. tetrahedra and kept_tetrahedra then
+  // count the cells each brick owns in its window.
+  // window_cells_rejected: candidate cells a brick owned in its window that the certificate
+  // showed not to be global (a voxel outside the window inside their circumsphere).
+  std::size_t windows = 0, window_points = 0, windows_regrown = 0, window_cells_rejected = 0;
 };
 
 // 7.1: are voxels a and b neighbours? With A the coarser (L(A) <= L(B)), b must lie within
