@@ -29,6 +29,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <mutex>
 #include <numeric>
 #include <sstream>
 #include <string>
@@ -197,6 +198,13 @@ std::array<float, 4> cell_distances(const Tet& t, const std::vector<float>& d) {
   return {d[t[0]], d[t[1]], d[t[2]], d[t[3]]};
 }
 
+// Which candidate list a kept cell goes to; kNever: it can never emit.
+enum class CellKind { kNever, kMixed, kNegativeOnly };
+CellKind cell_kind(const std::array<float, 4>& d) {
+  if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0)) return CellKind::kNever;
+  return (d[0] > 0 || d[1] > 0 || d[2] > 0 || d[3] > 0) ? CellKind::kMixed : CellKind::kNegativeOnly;
+}
+
 // The kept cells (7.1) that can emit, before or after snapping. Snapping only turns distances
 // into 0, so a cell without a negative voxel never emits, and a cell without a positive one can
 // only become the negative side of a zero face (1,3,0).
@@ -236,11 +244,8 @@ Candidates candidate_cells(const Voxels& v, const ExtractOptions& options, const
         const Tet& t = cells[i];
         if (!keep_cell(t, v, options.neighbourhood_n)) continue;
         ++local.kept;
-        const std::array<float, 4> d = cell_distances(t, v.distance);
-        const bool negative = d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0;
-        if (!negative) continue;
-        const bool positive = d[0] > 0 || d[1] > 0 || d[2] > 0 || d[3] > 0;
-        (positive ? local.c.mixed : local.c.negative_only).push_back(t);
+        const CellKind kind = cell_kind(cell_distances(t, v.distance));
+        if (kind != CellKind::kNever) (kind == CellKind::kMixed ? local.c.mixed : local.c.negative_only).push_back(t);
       }
     });
   });
@@ -261,21 +266,18 @@ Candidates candidate_cells(const Voxels& v, const ExtractOptions& options, const
 // within that reach of X's closed box, holds all four vertices of each kept cell X owns, and a
 // cell of the global triangulation with its vertices in the window is a cell of the window's
 // triangulation (its circumsphere is empty of every voxel, so of the window's; CGAL's symbolic
-// perturbation depends on the five points of a test alone). Conversely a cell of the window is a
-// global cell when its closed circumball holds no voxel outside the window: certified if the ball
-// lies strictly between the lattice planes next to the window's faces. A window with an owned
-// candidate cell that fails the certificate is redone with twice the reach (at worst the whole
-// field, where every cell is global). The union of the owned, kept, candidate cells is then
-// exactly the global one.
+// perturbation depends on the five points of a test alone). Conversely a window cell is global iff
+// no voxel outside the window is in its sphere (certificate.h): the voxels of one more brick layer
+// are tested exactly, an occupancy summary stands for the rest. A window whose certificate cannot
+// decide is redone with twice the reach (at worst the whole field, where every cell is global).
+// The union of the owned, kept, candidate cells is then exactly the global one.
 
-Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& options, ExtractStats* st) {
+Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& options, const ProgressFn& progress,
+                                    ExtractStats* st) {
   using extract_detail::LatticePoint;
   const int B = options.brick_level, n = options.neighbourhood_n;
-  int finest = 0, coarsest = kMaxLevel;
-  for (VoxelKey k : v.key) {
-    finest = std::max(finest, k.level());
-    coarsest = std::min(coarsest, k.level());
-  }
+  int finest = 0;
+  for (VoxelKey k : v.key) finest = std::max(finest, k.level());
   // Lattice of the finer of the finest level and the brick level, so that bricks are whole
   // lattice cells (a uniform scaling: the same Delaunay complex as the global path's lattice).
   const int G = std::max(finest, B);
@@ -324,7 +326,11 @@ Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& optio
     std::size_t tetrahedra = 0, kept = 0, windows = 0, points = 0, regrown = 0, rejected = 0;
   };
   tbb::enumerable_thread_specific<Local> locals;
-  tbb::parallel_for(std::size_t(0), starts.size() - 1, [&](std::size_t bi) {
+  const std::size_t bricks = starts.size() - 1;
+  std::mutex progress_mutex;
+  std::size_t bricks_done = 0;
+  report(progress, "tetrahedralize", 0, double(bricks));
+  tbb::parallel_for(std::size_t(0), bricks, [&](std::size_t bi) {
     Local& local = locals.local();
     const std::uint64_t id = by_brick[starts[bi]].first;
     const std::int64_t X[3] = {std::int64_t(id & 0xFFFFF), std::int64_t((id >> 20) & 0xFFFFF), std::int64_t(id >> 40)};
@@ -386,8 +392,8 @@ Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& optio
           ++mine.tetrahedra;
           if (!keep_cell(t, v, n)) return;
           ++mine.kept;
-          const std::array<float, 4> d = cell_distances(t, v.distance);
-          if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0)) return;
+          const CellKind kind = cell_kind(cell_distances(t, v.distance));
+          if (kind == CellKind::kNever) return;
           const LatticePoint* corners[4] = {&points[local_cell[0]], &points[local_cell[1]], &points[local_cell[2]],
                                             &points[local_cell[3]]};
           if (!whole) {
@@ -403,8 +409,7 @@ Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& optio
               return;
             }
           }
-          const bool positive = d[0] > 0 || d[1] > 0 || d[2] > 0 || d[3] > 0;
-          (positive ? mine.c.mixed : mine.c.negative_only).push_back(t);
+          (kind == CellKind::kMixed ? mine.c.mixed : mine.c.negative_only).push_back(t);
         });
       }
       ++local.windows;
@@ -421,6 +426,8 @@ Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& optio
       local.c.negative_only.insert(local.c.negative_only.end(), mine.c.negative_only.begin(), mine.c.negative_only.end());
       break;
     }
+    std::lock_guard lock(progress_mutex);
+    report(progress, "tetrahedralize", double(++bricks_done), double(bricks));
   });
   Candidates out;
   for (Local& l : locals) {
@@ -701,7 +708,7 @@ Mesh extract_surface(const std::vector<SurfaceVoxel>& voxels, const RootCube& ro
   Voxels v = prepare(voxels, root, &st);
   st.voxels = v.size();
 
-  Candidates cells = options.brick_level >= 0 ? candidate_cells_by_brick(v, options, &st)
+  Candidates cells = options.brick_level >= 0 ? candidate_cells_by_brick(v, options, progress, &st)
                                               : candidate_cells(v, options, progress, &st);
   report(progress, "extract", 0, kStages);
   st.snapped_voxels = snap_voxels(v, cells.mixed, options.snap_fraction);
