@@ -91,7 +91,8 @@ nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
                   {"kept_tetrahedra", s.extract.kept_tetrahedra}, {"snapped_voxels", s.extract.snapped_voxels},
                   {"removed_components", s.extract.removed_components}, {"windows", s.extract.windows},
                   {"window_points", s.extract.window_points}, {"windows_regrown", s.extract.windows_regrown},
-                  {"window_cells_rejected", s.extract.window_cells_rejected}};
+                  {"window_cells_rejected", s.extract.window_cells_rejected},
+                  {"mode", s.extract.by_brick ? "bricks" : "global"}};
   j["mesh"] = {{"vertices", mesh.vertices.size()}, {"triangles", mesh.faces.size()}};
   nlohmann::json times = nlohmann::json::object();
   for (const auto& t : s.times) times[t.stage] = t.seconds;
@@ -351,7 +352,7 @@ void add_fuse_command(CLI::App& app) {
   cmd->add_option("--image", args->mve_image, "MVE colour embedding (e.g. undist-L2)");
   cmd->add_option("--confidence", args->mve_confidence, "MVE confidence embedding (e.g. conf-L2)");
   cmd->add_option("--bbox", args->bbox, "clip box xmin,ymin,zmin,xmax,ymax,zmax (metres)");
-  cmd->add_option("--extract", args->extract_mode, "tetrahedralization: global (at once) | bricks (per brick window; the same mesh)");
+  cmd->add_option("--extract", args->extract_mode, "tetrahedralization: global (at once) | bricks (per brick window; the same mesh) | auto (default: bricks when global would exceed --memory-limit)");
   cmd->add_option("--job", args->job, "job directory (default: OUTPUT.job); an unfinished job there resumes");
   cmd->add_flag("--follow", args->follow,
                 "keep integrating depth maps as they appear in INPUT until the stop file exists or SIGTERM");

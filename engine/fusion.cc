@@ -60,7 +60,9 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
   s.add("extract.snap_fraction", &o.extract.snap_fraction, "edge", "vertex snapping distance (7.2); 0 = off");
   s.add("extract.min_component_triangles", &o.extract.min_component_triangles, "triangles",
         "remove connected components smaller than this; 0 = keep all");
-  s.add("extract.mode", &o.extract.mode, "", "global: one Delaunay tetrahedralization | bricks: per brick window (same mesh)");
+  s.add("extract.mode", &o.extract.mode, "",
+        "global: one Delaunay tetrahedralization | bricks: per brick window (same mesh) | auto: bricks if global "
+        "would exceed the memory limit");
   s.add("extract.parallel_min_voxels", &o.extract.parallel_min_voxels, "voxels",
         "use CGAL's parallel Delaunay insertion from this many voxels (with > 1 thread)");
   s.add("octree.bbox", &o.octree.bbox, "m", "clip box xmin,ymin,zmin,xmax,ymax,zmax; empty = data bounds");
@@ -470,7 +472,8 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   map.clear();  // release the field before the tetrahedralization
   if (voxels.size() < 4) throw InputError("too few confident voxels to extract a surface (" + std::to_string(voxels.size()) + ")");
   ExtractOptions extract = options.extract;
-  if (extract.mode == "bricks") extract.brick_level = map.brick_level();
+  const bool too_big = map.memory_limit() > 0 && voxels.size() * kDelaunayBytesPerVoxel > map.memory_limit();
+  if (extract.mode == "bricks" || (extract.mode == "auto" && too_big)) extract.brick_level = map.brick_level();
   Mesh mesh = extract_surface(voxels, root, extract, hooks.progress, &stats.extract);
   end_stage("extract");
   stats.peak_rss_bytes = peak_rss_bytes();

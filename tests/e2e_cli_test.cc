@@ -133,6 +133,7 @@ TEST(CliValidScene, ExtractionByBricksGivesTheGlobalMeshOnTheRealBunny) {
   EXPECT_GT(ga.size(), 1000000u);
   EXPECT_TRUE(ga == gb) << "the per-brick mesh differs from the global one";
   const auto j = nlohmann::json::parse(std::ifstream(stats));
+  EXPECT_EQ(j["extract"]["mode"], "bricks");
   EXPECT_GT(j["extract"]["windows"].get<int>(), 100);
   EXPECT_GT(j["extract"]["window_cells_rejected"].get<int>(), 0);
   EXPECT_EQ(fuse(scans, root / "bad.ply", config + " --extract sideways").code, 2);
@@ -181,6 +182,15 @@ TEST(CliValidScene, WritesMeshStatsAndVdb) {
   std::ifstream a(out, std::ios::binary), b(out1, std::ios::binary);
   const std::string sa((std::istreambuf_iterator<char>(a)), {}), sb((std::istreambuf_iterator<char>(b)), {});
   EXPECT_TRUE(sa == sb) << "meshes differ between 1 and 2 threads";
+  EXPECT_EQ(j["extract"]["mode"], "global");  // the default memory limit holds the global tetrahedralization
+  // A memory limit the global tetrahedralization would exceed: --extract auto (the default) goes
+  // brick by brick, and the mesh does not change.
+  const fs::path out_small = root / "bunny-small.ply", stats_small = root / "small.json";
+  ASSERT_EQ(fuse(root / "scene", out_small, "--memory-limit 4M --stats " + stats_small.string()).code, 0);
+  std::ifstream c(out_small, std::ios::binary);
+  const std::string sc((std::istreambuf_iterator<char>(c)), {});
+  EXPECT_TRUE(sa == sc) << "meshes differ between the global and the per-brick tetrahedralization";
+  EXPECT_EQ(nlohmann::json::parse(std::ifstream(stats_small))["extract"]["mode"], "bricks");
 }
 
 }  // namespace

@@ -61,7 +61,8 @@ void ExtractOptions::check() const {
     s << "extract: snap fraction must be in [0, 0.5), got " << snap_fraction << " (0 turns snapping off)";
     throw InputError(s.str());
   }
-  if (mode != "global" && mode != "bricks") throw InputError("extract: mode must be global or bricks, got '" + mode + "'");
+  if (mode != "global" && mode != "bricks" && mode != "auto")
+    throw InputError("extract: mode must be global, bricks or auto, got '" + mode + "'");
   if (brick_level < -1 || brick_level > kMaxLevel) {
     throw InputError("extract: brick level must be -1 (global) or in [0, " + std::to_string(kMaxLevel) + "], got " +
                      std::to_string(brick_level));
@@ -708,6 +709,7 @@ Mesh extract_surface(const std::vector<SurfaceVoxel>& voxels, const RootCube& ro
   Voxels v = prepare(voxels, root, &st);
   st.voxels = v.size();
 
+  st.by_brick = options.brick_level >= 0;
   Candidates cells = options.brick_level >= 0 ? candidate_cells_by_brick(v, options, progress, &st)
                                               : candidate_cells(v, options, progress, &st);
   report(progress, "extract", 0, kStages);

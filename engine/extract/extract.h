@@ -62,14 +62,19 @@ struct ExtractOptions {
   // arena has more than one thread and there are at least this many voxels. The triangulation is
   // the same either way; 0 = parallel whenever the arena allows it.
   std::size_t parallel_min_voxels = 20000;
-  // "global" | "bricks": the fusion sets brick_level to its field's brick level for "bricks".
-  std::string mode = "global";
+  // "global" | "bricks" | "auto": the fusion sets brick_level to its field's brick level for
+  // "bricks", and for "auto" when the global tetrahedralization (kDelaunayBytesPerVoxel per voxel)
+  // would not fit the memory limit.
+  std::string mode = "auto";
   // >= 0: tetrahedralize brick by brick (bricks of this octree level, windows in parallel) instead
   // of at once; the kept cells, and so the mesh, are the same (see candidate cells below). -1: one
   // global triangulation.
   int brick_level = -1;
   void check() const;             // throws InputError on a bad value
 };
+
+// The global Delaunay tetrahedralization's peak memory per voxel (CGAL cells and vertices, measured).
+inline constexpr std::size_t kDelaunayBytesPerVoxel = 550;
 
 struct ExtractStats {
   // voxels: triangulated; tetrahedra: finite Delaunay cells; kept_tetrahedra: cells left by 7.1;
@@ -89,6 +94,7 @@ struct ExtractStats {
   // window_cells_rejected: candidate cells a brick owned in its window that the certificate
   // showed not to be global (a voxel outside the window inside their circumsphere).
   std::size_t windows = 0, window_points = 0, windows_regrown = 0, window_cells_rejected = 0;
+  bool by_brick = false;  // which tetrahedralization ran
 };
 
 // 7.1: are voxels a and b neighbours? With A the coarser (L(A) <= L(B)), b must lie within
