@@ -289,14 +289,18 @@ Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& optio
     return (std::uint64_t(z) << 40) | (std::uint64_t(y) << 20) | std::uint64_t(x);
   };
   const std::int64_t last_brick = (std::int64_t{1} << B) - 1;
+  // The brick of a lattice point (the last brick also takes the lattice's far faces), packed.
+  const auto brick_of_point = [&](const LatticePoint& p) {
+    std::int64_t b[3];
+    for (int a = 0; a < 3; ++a) b[a] = std::min<std::int64_t>(p[a] / brick_side, last_brick);
+    return brick_id(b[0], b[1], b[2]);
+  };
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, v.size()), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const VoxelKey k = v.key[i];
       const int shift = G - k.level();
       lattice[i] = {std::int32_t(k.x()) << shift, std::int32_t(k.y()) << shift, std::int32_t(k.z()) << shift};
-      std::int64_t b[3];
-      for (int a = 0; a < 3; ++a) b[a] = std::min<std::int64_t>(lattice[i][a] / brick_side, last_brick);
-      by_brick[i] = {brick_id(b[0], b[1], b[2]), std::uint32_t(i)};
+      by_brick[i] = {brick_of_point(lattice[i]), std::uint32_t(i)};
     }
   });
   tbb::parallel_sort(by_brick.begin(), by_brick.end());
@@ -387,9 +391,7 @@ Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& optio
             const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
             if (lk < lo_ || (lk == lo_ && t[k] < t[owner])) owner = k;
           }
-          const LatticePoint& o = lattice[t[owner]];
-          for (int a = 0; a < 3; ++a)
-            if (std::min<std::int64_t>(o[a] / brick_side, last_brick) != X[a]) return;
+          if (brick_of_point(lattice[t[owner]]) != id) return;
           ++mine.tetrahedra;
           if (!keep_cell(t, v, n)) return;
           ++mine.kept;
