@@ -42,7 +42,6 @@ using namespace integrate_detail;
 // A triangle prepared for the prism enumeration.
 struct PreparedTriangle {
   Vector3d P[3];
-  Vector2d q[3];          // sensor-plane positions
   std::uint32_t idx[3];
   Vector3d normal;        // unit, facing the sensor
   Vector3d dir[3];        // lines of sight through the vertices
@@ -54,10 +53,11 @@ struct PreparedTriangle {
 
 PreparedTriangle prepare(const DepthFrame& f, const FrameTriangle& t) {
   PreparedTriangle p;
+  Eigen::Vector2f q[3];  // sensor-plane positions
   for (int k = 0; k < 3; ++k) {
     p.idx[k] = t[k];
     p.P[k] = f.position[t[k]].cast<double>();
-    p.q[k] = f.image_pos[t[k]].cast<double>();
+    q[k] = f.image_pos[t[k]];
   }
   if (!facing_normal(f.sensor, p.P, &p.normal)) return p;
   const Sensor& sensor = f.sensor;
@@ -74,7 +74,7 @@ PreparedTriangle prepare(const DepthFrame& f, const FrameTriangle& t) {
     p.side_normal[e] = m / mn;
     p.side_offset[e] = p.side_normal[e].dot(A);
   }
-  p.ok = p.own.init(p.q, p.idx);
+  p.ok = p.own.init(q, p.idx);
   return p;
 }
 
@@ -207,14 +207,13 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
         } else {
           q = xs.head<2>();
         }
-        double bary[3];
         double E[3];
-        if (!T.own.owns(T.q, q, E)) continue;
-        if (beyond_ramp(T.normal, T.P[0], X, ramp, options)) continue;
-        T.own.bary(E, bary);
-        const Vector3d dir = perspective ? Vector3d((X - centre).normalized()) : axis;
+        if (!T.own.owns(q, E)) continue;
+        const double plane = T.normal.dot(T.P[0] - X);
+        if (beyond_ramp(plane, ramp, options)) continue;
+        const double cosine = perspective ? sight_cosine(T.normal, X - centre) : T.normal.dot(axis);
         VoxelSample v;
-        if (!voxel_sample(frame, T.idx, T.normal, T.P[0], bary, X, dir, ramp, options, &v)) continue;
+        if (!voxel_sample(frame, T.idx, T.own, E, plane, cosine, ramp, options, &v)) continue;
         Contribution c;
         std::int64_t idx[3];
         idx[ax] = ia;
@@ -247,12 +246,7 @@ IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector
   // The region in world coordinates, widened a little: a triangle reaches only voxels within a
   // ramp of it, so one whose box widened by its ramp misses this is skipped.
   Eigen::AlignedBox3d region_box;
-  if (region) {
-    const double bs = root.cell_size(brick_level), pad = 1e-6 * bs;
-    const Eigen::Vector3d lo(region->lo.x, region->lo.y, region->lo.z), hi(region->hi.x, region->hi.y, region->hi.z);
-    region_box = Eigen::AlignedBox3d(root.min + lo * bs - Eigen::Vector3d::Constant(pad),
-                                     root.min + hi * bs + Eigen::Vector3d::Constant(pad));
-  }
+  if (region) region_box = world_box(*region, root, brick_level);
   IntegrateStats total;
   std::mutex stats_mutex;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 2048), [&](const tbb::blocked_range<std::size_t>& r) {

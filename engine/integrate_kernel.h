@@ -4,6 +4,7 @@
 // engine/integrate_projective.cc). Both must decide ownership and compute distances with the very
 // same operations, so that the two enumerations give bit-identical fields.
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -25,40 +26,47 @@ inline Eigen::Vector2d pixel_of(const Sensor& s, const Eigen::Vector3d& xs) {
 
 // Ownership of lines of sight by a triangle in the sensor plane. Edge e joins local vertices
 // lo[e], hi[e], ordered by sample index, so the triangle on the other side of the edge evaluates a
-// bit-identical edge function and exactly one of the two owns each point of the edge.
+// bit-identical edge function and exactly one of the two owns each point of the edge. The vertices
+// are kept as the frame stores them (float) and widened on use, which is exact.
 struct Ownership {
+  Eigen::Vector2f q[3];
   std::uint8_t lo[3], hi[3];
-  double opp[3];  // edge function of edge e at the opposite vertex e (never 0)
+  bool positive[3];   // the triangle lies on the positive side of edge e
+  double inv_opp[3];  // 1 / edge function of edge e at the opposite vertex e (never 0)
 
-  static double edge(const Eigen::Vector2d q[3], int lo, int hi, const Eigen::Vector2d& p) {
-    return cross2(q[hi] - q[lo], p - q[lo]);
+  static double edge(const Eigen::Vector2f& lo, const Eigen::Vector2f& hi, const Eigen::Vector2d& p) {
+    const Eigen::Vector2d a = lo.cast<double>();
+    return cross2(hi.cast<double>() - a, p - a);
   }
-  // Sets lo/hi/opp; false if the triangle is degenerate in the sensor plane.
-  bool init(const Eigen::Vector2d q[3], const std::uint32_t idx[3]) {
+  // Sets the fields; false if the triangle is degenerate in the sensor plane.
+  bool init(const Eigen::Vector2f qv[3], const std::uint32_t idx[3]) {
+    for (int k = 0; k < 3; ++k) q[k] = qv[k];
     for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e
       int a = (e + 1) % 3, b = (e + 2) % 3;
       if (idx[a] > idx[b]) std::swap(a, b);
       lo[e] = std::uint8_t(a);
       hi[e] = std::uint8_t(b);
-      const double v = edge(q, a, b, q[e]);
+      const double v = edge(q[a], q[b], q[e].cast<double>());
       if (v == 0 || !std::isfinite(v)) return false;
-      opp[e] = v;
+      positive[e] = v > 0;
+      inv_opp[e] = 1.0 / v;
     }
     return true;
   }
   // True if the triangle owns the line of sight through p; `E` receives the edge functions at p,
   // from which bary() gives the barycentric coordinates (apart, as most owned voxels of an
-  // enumeration lie off the ramp and never need them).
-  bool owns(const Eigen::Vector2d q[3], const Eigen::Vector2d& p, double E[3]) const {
+  // enumeration lie off the ramp and never need them). All three edges are tested without an
+  // early exit: fewer unpredictable branches than rejected work.
+  bool owns(const Eigen::Vector2d& p, double E[3]) const {
+    bool inside = true;
     for (int e = 0; e < 3; ++e) {
-      E[e] = edge(q, lo[e], hi[e], p);
-      const bool positive_side = opp[e] > 0;
-      if (positive_side ? E[e] < 0 : (E[e] > 0 || E[e] == 0)) return false;
+      E[e] = edge(q[lo[e]], q[hi[e]], p);
+      inside &= positive[e] ? E[e] >= 0 : E[e] < 0;
     }
-    return true;
+    return inside;
   }
   void bary(const double E[3], double out[3]) const {
-    for (int e = 0; e < 3; ++e) out[e] = E[e] / opp[e];
+    for (int e = 0; e < 3; ++e) out[e] = E[e] * inv_opp[e];
   }
 };
 
@@ -72,6 +80,14 @@ inline bool facing_normal(const Sensor& sensor, const Eigen::Vector3d P[3], Eige
   if (n.dot(sensor.ray_direction(centroid)) > 0) n = -n;
   *normal = n;
   return true;
+}
+
+// The region's bricks in world coordinates, widened a little (for culling triangles that cannot
+// reach it: a triangle writes only within a ramp of itself).
+inline Eigen::AlignedBox3d world_box(const BrickBox& region, const RootCube& root, int brick_level) {
+  const double bs = root.cell_size(brick_level), pad = 1e-6 * bs;
+  const Eigen::Vector3d lo(region.lo.x, region.lo.y, region.lo.z), hi(region.hi.x, region.hi.y, region.hi.z);
+  return {root.min + lo * bs - Eigen::Vector3d::Constant(pad), root.min + hi * bs + Eigen::Vector3d::Constant(pad)};
 }
 
 // The ramp of a triangle of level `level_of_triangle` inserted at `level` (<= it).
@@ -100,10 +116,15 @@ inline bool insertion_levels(const DepthFrame& f, const std::uint32_t idx[3], co
 // without its line of sight: |distance along the ray| = |plane distance| / |cosine| >= |plane
 // distance|, and the floating-point division keeps that order. Saves the square root for the many
 // voxels of an enumeration's bounding slab that lie off the ramp.
-inline bool beyond_ramp(const Eigen::Vector3d& normal, const Eigen::Vector3d& P0, const Eigen::Vector3d& X, double ramp,
-                        const IntegrateOptions& options) {
-  const double plane = normal.dot(P0 - X);  // distance x cosine, cosine < 0 for any voxel accepted
+// `plane` = normal . (P0 - X): the ray distance times the cosine, which is < 0 for any voxel accepted.
+inline bool beyond_ramp(double plane, double ramp, const IntegrateOptions& options) {
   return plane > 0 ? plane > ramp * options.behind : -plane > ramp;
+}
+
+// The cosine between the triangle's normal and the line of sight D (from the sensor to the voxel,
+// any length): one square root and one division instead of normalizing D.
+inline double sight_cosine(const Eigen::Vector3d& normal, const Eigen::Vector3d& D) {
+  return normal.dot(D) / std::sqrt(D.squaredNorm());
 }
 
 // std::clamp(std::lround(v), 0, 255) bit for bit, without lround's libm call (baseline x86-64 has
@@ -115,22 +136,22 @@ inline std::uint8_t colour_byte(double v) {
   return std::uint8_t(i + (v - double(i) >= 0.5 ? 1 : 0));
 }
 
-// Signed distance and weight of the voxel at X, whose line of sight the triangle (normal, P0)
-// owns with barycentric coordinates `bary`; false if the voxel gets nothing. `dir` is the unit line
-// of sight through X.
+// Signed distance and weight of a voxel whose line of sight the triangle `own` owns with edge
+// functions E; `plane` = normal . (P0 - X), `cosine` = sight_cosine(normal, line of sight). False
+// if the voxel gets nothing.
 struct VoxelSample {
   float distance, weight;
   std::uint8_t colour[3];
   bool has_colour;
 };
-inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Eigen::Vector3d& normal,
-                         const Eigen::Vector3d& P0, const double bary[3], const Eigen::Vector3d& X,
-                         const Eigen::Vector3d& dir, double ramp, const IntegrateOptions& options, VoxelSample* out) {
-  const double cosine = normal.dot(dir);  // < 0: the normal faces the sensor
-  if (!(-cosine >= options.min_cosine)) return false;
-  const double distance = normal.dot(P0 - X) / cosine;  // > 0: in front of the surface
+inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Ownership& own, const double E[3],
+                         double plane, double cosine, double ramp, const IntegrateOptions& options, VoxelSample* out) {
+  if (!(-cosine >= options.min_cosine)) return false;  // cosine < 0: the normal faces the sensor
+  const double distance = plane / cosine;  // > 0: in front of the surface
   if (distance < 0) ramp *= options.behind;  // the ramp behind the surface may be shorter
   if (!(std::abs(distance) <= ramp)) return false;
+  double bary[3];
+  own.bary(E, bary);
   double conf = 1.0;
   if (!frame.confidence.empty())
     conf = bary[0] * frame.confidence[idx[0]] + bary[1] * frame.confidence[idx[1]] + bary[2] * frame.confidence[idx[2]];

@@ -40,8 +40,8 @@ inline void accumulate(VoxelData& v, float distance, float weight, const std::ui
   v.distance = (v.weight * v.distance + weight * distance) / W;
   v.weight = W;
   if (colour) {
-    const float Wc = v.colour_weight + weight;
-    for (int k = 0; k < 3; ++k) v.colour[k] = (v.colour_weight * v.colour[k] + weight * float(colour[k])) / Wc;
+    const float Wc = v.colour_weight + weight, inv = 1.0f / Wc;
+    for (int k = 0; k < 3; ++k) v.colour[k] = (v.colour_weight * v.colour[k] + weight * float(colour[k])) * inv;
     v.colour_weight = Wc;
   }
 }
