@@ -55,8 +55,7 @@ struct Ownership {
   }
   // True if the triangle owns the line of sight through p; `E` receives the edge functions at p,
   // from which bary() gives the barycentric coordinates (apart, as most owned voxels of an
-  // enumeration lie off the ramp and never need them). All three edges are tested without an
-  // early exit: fewer unpredictable branches than rejected work.
+  // enumeration lie off the ramp and never need them).
   bool owns(const Eigen::Vector2d& p, double E[3]) const {
     bool inside = true;
     for (int e = 0; e < 3; ++e) {
