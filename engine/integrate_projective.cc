@@ -170,6 +170,20 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     *qr0 = std::max(0, ty * kTile - 1), *qr1 = std::min(QH, (ty + 1) * kTile);
     *qc0 = std::max(0, tx * kTile - 1), *qc1 = std::min(QW, (tx + 1) * kTile);
   };
+  // Every triangle's levels (counted in the statistics whether or not this call evaluates it).
+  p.tris.assign(triangles.size(), GridTriangle{});
+  std::vector<GridTriangle>& tris = p.tris;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t t = r.begin(); t != r.end(); ++t) {
+      GridTriangle& g = tris[t];
+      for (int k = 0; k < 3; ++k) g.idx[k] = triangles[t][k];
+      int lt = 0, coarsest = 0;
+      if (!insertion_levels(frame, g.idx, root, options, &lt, &coarsest)) continue;
+      g.level = std::int8_t(lt);
+      g.coarsest = std::int8_t(coarsest);
+    }
+  });
+
   std::vector<char> tile_active(std::size_t(TX) * TY, 1);
   std::vector<char> quad_needed;
   if (region_box) {
@@ -183,18 +197,12 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       for (int r = qr0; r < qr1; ++r)
         for (int c = qc0; c < qc1; ++c)
           for (std::int32_t t : p.quad[std::size_t(r) * QW + c].tri) {
-            if (t < 0) continue;
-            int lt = 0, coarsest = 0;
-            if (!insertion_levels(frame, triangles[t].data(), root, options, &lt, &coarsest)) continue;
-            reach = std::max(reach, insertion_ramp(options, root, coarsest, lt));
-            for (std::uint32_t i : triangles[t]) box.extend(frame.position[i].cast<double>());
+            if (t < 0 || tris[t].level < 0) continue;
+            reach = std::max(reach, insertion_ramp(options, root, tris[t].coarsest, tris[t].level));
+            for (std::uint32_t i : tris[t].idx) box.extend(frame.position[i].cast<double>());
           }
-      if (box.isEmpty()) {
-        tile_active[tile] = 0;
-        return;
-      }
       const Vector3d pad = Vector3d::Constant(reach + 1e-6 * root.size);
-      tile_active[tile] = Eigen::AlignedBox3d(box.min() - pad, box.max() + pad).intersects(*region_box);
+      tile_active[tile] = !box.isEmpty() && Eigen::AlignedBox3d(box.min() - pad, box.max() + pad).intersects(*region_box);
     });
     quad_needed.assign(p.quad.size(), 0);
     for (int tile = 0; tile < TX * TY; ++tile) {
@@ -205,19 +213,13 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     }
   }
 
-  p.tris.assign(triangles.size(), GridTriangle{});
-  std::vector<GridTriangle>& tris = p.tris;
+  // The geometry of the triangles this call can evaluate.
   tbb::parallel_for(tbb::blocked_range<int>(0, QH, 16), [&](const tbb::blocked_range<int>& rows) {
     for (int qi = rows.begin() * QW; qi != rows.end() * QW; ++qi) {
+      if (!quad_needed.empty() && !quad_needed[std::size_t(qi)]) continue;
       for (std::int32_t t : p.quad[std::size_t(qi)].tri) {
-        if (t < 0) continue;
+        if (t < 0 || tris[t].level < 0) continue;
         GridTriangle& g = tris[t];
-        for (int k = 0; k < 3; ++k) g.idx[k] = triangles[t][k];
-        int lt = 0, coarsest = 0;
-        if (!insertion_levels(frame, g.idx, root, options, &lt, &coarsest)) continue;
-        g.level = std::int8_t(lt);
-        g.coarsest = std::int8_t(coarsest);
-        if (!quad_needed.empty() && !quad_needed[std::size_t(qi)]) continue;  // counted, never evaluated
         Vector3d P[3];
         Eigen::Vector2f q[3];
         for (int k = 0; k < 3; ++k) {
