@@ -371,8 +371,8 @@ struct ColumnPlane {
 class RowPrefilter {
  public:
   RowPrefilter(const ColumnPlane cp[8], double t_lo, double t_hi, double slack) : slack_(slack) {
-    // (The pair of the lattice's own bounds is a constant, true constraint and is left out.)
-    // Bounds on t as affine forms alpha + beta ib + gamma ic; the lattice's own range counts too.
+    // Bounds on t as affine forms alpha + beta ib + gamma ic, the lattice's own range first (its
+    // pair with itself is a constant, true constraint and is left out).
     struct Bound {
       double alpha, beta, gamma;
     };
