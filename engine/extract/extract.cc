@@ -314,16 +314,19 @@ Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& optio
   tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
   occ.cells.erase(std::unique(occ.cells.begin(), occ.cells.end()), occ.cells.end());
   occ.cells.shrink_to_fit();
-  std::vector<std::size_t> starts;  // first entry of each brick in by_brick
+  std::vector<std::size_t> starts;  // first entry of each brick in by_brick, then the end
+  std::vector<std::uint64_t> ids;   // each brick's id, sorted
   for (std::size_t i = 0; i < by_brick.size(); ++i)
-    if (i == 0 || by_brick[i].first != by_brick[i - 1].first) starts.push_back(i);
+    if (i == 0 || by_brick[i].first != by_brick[i - 1].first) {
+      starts.push_back(i);
+      ids.push_back(by_brick[i].first);
+    }
   starts.push_back(by_brick.size());
   const auto find_brick = [&](std::uint64_t id) -> std::pair<std::size_t, std::size_t> {
-    const auto it = std::lower_bound(by_brick.begin(), by_brick.end(), std::pair<std::uint64_t, std::uint32_t>{id, 0});
-    if (it == by_brick.end() || it->first != id) return {0, 0};
-    auto end = it;
-    while (end != by_brick.end() && end->first == id) ++end;
-    return {std::size_t(it - by_brick.begin()), std::size_t(end - by_brick.begin())};
+    const auto it = std::lower_bound(ids.begin(), ids.end(), id);
+    if (it == ids.end() || *it != id) return {0, 0};
+    const std::size_t k = std::size_t(it - ids.begin());
+    return {starts[k], starts[k + 1]};
   };
 
   struct Local {
@@ -337,7 +340,7 @@ Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& optio
   report(progress, "tetrahedralize", 0, double(bricks));
   tbb::parallel_for(std::size_t(0), bricks, [&](std::size_t bi) {
     Local& local = locals.local();
-    const std::uint64_t id = by_brick[starts[bi]].first;
+    const std::uint64_t id = ids[bi];
     const std::int64_t X[3] = {std::int64_t(id & 0xFFFFF), std::int64_t((id >> 20) & 0xFFFFF), std::int64_t(id >> 40)};
     int lmin = kMaxLevel;
     for (std::size_t i = starts[bi]; i < starts[bi + 1]; ++i) lmin = std::min(lmin, v.key[by_brick[i].second].level());
