@@ -63,7 +63,25 @@ class StopSignals {
 };
 
 
-nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
+struct MeshCounts {
+  std::size_t vertices = 0, triangles = 0;
+};
+
+// The output PLY, refused (before anything is written) when the mesh has no triangle.
+class NonEmptyPly : public PlyStreamWriter {
+ public:
+  NonEmptyPly(const std::string& path, MeshCounts* counts) : PlyStreamWriter(path), counts_(counts) {}
+  void begin(std::size_t vertices, std::size_t faces) override {
+    if (faces == 0) throw InputError("the fused field has no surface (no zero crossing survived); nothing written");
+    *counts_ = {vertices, faces};
+    PlyStreamWriter::begin(vertices, faces);
+  }
+
+ private:
+  MeshCounts* counts_;
+};
+
+nlohmann::json stats_json(const FusionStats& s, const MeshCounts& mesh) {
   nlohmann::json j;
   j["format"] = s.format;
   j["depth_maps"] = s.depth_maps;
@@ -93,7 +111,7 @@ nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
                   {"window_points", s.extract.window_points}, {"windows_regrown", s.extract.windows_regrown},
                   {"window_cells_rejected", s.extract.window_cells_rejected},
                   {"mode", s.extract.by_brick ? "bricks" : "global"}};
-  j["mesh"] = {{"vertices", mesh.vertices.size()}, {"triangles", mesh.faces.size()}};
+  j["mesh"] = {{"vertices", mesh.vertices}, {"triangles", mesh.triangles}};
   nlohmann::json times = nlohmann::json::object();
   for (const auto& t : s.times) times[t.stage] = t.seconds;
   j["seconds"] = times;
@@ -105,7 +123,7 @@ nlohmann::json stats_json(const FusionStats& s, const Mesh& mesh) {
   return j;
 }
 
-void print_summary(const FusionStats& s, const Mesh& mesh, const std::string& output) {
+void print_summary(const FusionStats& s, const MeshCounts& mesh, const std::string& output) {
   std::fprintf(stderr, "\nsummary (%s input)\n", s.format.c_str());
   std::fprintf(stderr, "  depth maps       %zu\n  samples          %zu\n  triangles in     %zu\n", s.depth_maps,
                s.samples, s.triangles);
@@ -124,7 +142,7 @@ void print_summary(const FusionStats& s, const Mesh& mesh, const std::string& ou
                s.regularize.blended, s.regularize.deleted_unconfident, s.regularize.deleted_duplicates);
   std::fprintf(stderr, "  tetrahedra       %zu (%zu kept by the neighbourhood rule)\n", s.extract.tetrahedra,
                s.extract.kept_tetrahedra);
-  std::fprintf(stderr, "  output           %zu vertices, %zu triangles\n", mesh.vertices.size(), mesh.faces.size());
+  std::fprintf(stderr, "  output           %zu vertices, %zu triangles\n", mesh.vertices, mesh.triangles);
   double total = 0;
   for (const auto& t : s.times) {
     std::fprintf(stderr, "  time %-11s %8.2f s\n", t.stage.c_str(), t.seconds);
@@ -184,6 +202,7 @@ void run_fuse(const FuseArgs& a) {
   shorthand(a.mve_confidence, "input.mve_confidence");
   shorthand(a.bbox, "octree.bbox");
   shorthand(a.extract_mode, "extract.mode");
+  shorthand(a.brick_size, "octree.brick_size");
   for (const auto& s : a.sets) params.set_assignment(s);
   options.check();
   if (!a.quiet || a.print_params) std::fprintf(stderr, "effective parameters:\n%s", params.describe().c_str());
@@ -246,7 +265,7 @@ void run_fuse(const FuseArgs& a) {
       std::filesystem::remove_all(job_options.dir);
     }
   }
-  auto run_job = [&](Job& job, Mesh& mesh, FusionStats& stats) -> bool {
+  auto run_job = [&](Job& job, MeshCounts& mesh, FusionStats& stats) -> bool {
     write_text_atomically(job.dir() / "config.toml",
                           "# effective configuration of this job (scalefuse resume reads it)\n" + params.assignments());
     if (!a.quiet)
@@ -270,9 +289,14 @@ void run_fuse(const FuseArgs& a) {
     // Past integration a signal ends the process as usual: the job is checkpointed.
     hooks.integrated = [&] { stop_signals.reset(); };
     hooks.stop_after_integration = a.integrate_only;
+    // The mesh streams into the output (temporary name until complete); the extraction's scratch
+    // files live in the job.
+    NonEmptyPly ply(a.output, &mesh);
+    hooks.mesh_out = &ply;
+    hooks.scratch = job.dir() / "scratch";
     tbb::task_arena arena(threads);
     try {
-      arena.execute([&] { mesh = fuse(*source, options, hooks, &stats, &job); });
+      arena.execute([&] { fuse(*source, options, hooks, &stats, &job); });
     } catch (const Interrupted& e) {
       printer.finish();
       throw JobInterrupted(std::string(e.what()) + "; checkpoint written; continue with: scalefuse resume " +
@@ -285,7 +309,7 @@ void run_fuse(const FuseArgs& a) {
   // An implicit job whose depth maps changed is started over (once); an explicit one is refused.
   std::optional<Job> job_holder;
   FusionStats stats;
-  Mesh mesh;
+  MeshCounts mesh;
   bool extracted = false;
   for (int attempt = 0;; ++attempt) {
     job_holder.emplace(job_options, identity, input_abs, output_abs);
@@ -312,8 +336,6 @@ void run_fuse(const FuseArgs& a) {
                 stats.brick_level, std::filesystem::absolute(job.dir()).c_str());
     return;
   }
-  if (mesh.faces.empty()) throw InputError("the fused field has no surface (no zero crossing survived); nothing written");
-  write_ply_mesh(a.output, mesh);
   link_into_job(a.output, job.dir() / "mesh.ply");
   job.finished(std::filesystem::absolute(a.output));
   if (follow) {  // consumed: a later --follow of this job must not stop at once
@@ -352,6 +374,9 @@ void add_fuse_command(CLI::App& app) {
   cmd->add_option("--image", args->mve_image, "MVE colour embedding (e.g. undist-L2)");
   cmd->add_option("--confidence", args->mve_confidence, "MVE confidence embedding (e.g. conf-L2)");
   cmd->add_option("--bbox", args->bbox, "clip box xmin,ymin,zmin,xmax,ymax,zmax (metres)");
+  cmd->add_option("--brick-size", args->brick_size,
+                  "brick edge in metres at most (bricks are the unit of paging and of extraction; default: the finest "
+                  "level - 8)");
   cmd->add_option("--extract", args->extract_mode, "tetrahedralization: global (at once) | bricks (per brick window; the same mesh) | auto (default: bricks when global would exceed --memory-limit)");
   cmd->add_option("--job", args->job, "job directory (default: OUTPUT.job); an unfinished job there resumes");
   cmd->add_flag("--follow", args->follow,

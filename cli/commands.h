@@ -13,7 +13,7 @@ namespace sf::cli {
 // The options of `fuse`, shared with `resume`.
 struct FuseArgs {
   std::string input, output, config, export_vdb, stats_json, job, memory_limit;
-  std::string format, colmap_maps, mve_depth, mve_image, mve_confidence, bbox, extract_mode;
+  std::string format, colmap_maps, mve_depth, mve_image, mve_confidence, bbox, extract_mode, brick_size;
   std::vector<std::string> sets;
   std::vector<std::string> more_inputs;  // further input folders after `input` (a grown job)
   bool add = false;                      // scalefuse add: the inputs may extend the job's

@@ -15,13 +15,16 @@
 
 #include "engine/error.h"
 #include "engine/hsdf_math.h"
+#include "engine/extract/brick_extract.h"
 #include "scheduler/tile_plan.h"
+#include "storage/mailbox.h"
 
 namespace sf {
 
 void OctreeOptions::check() const {
   if (!(padding >= 0 && padding <= 1)) throw InputError("octree.padding must be in [0, 1]");
   if (brick_level < -1 || brick_level > 10) throw InputError("octree.brick_level must be -1 (auto) or in 0..10");
+  if (!(brick_size >= 0)) throw InputError("octree.brick_size must be >= 0 metres (0: from octree.brick_level)");
   parse_bbox(bbox);
 }
 
@@ -69,6 +72,8 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
   s.add("octree.padding", &o.octree.padding, "", "root cube margin, fraction of the data extent per side");
   s.add("octree.brick_level", &o.octree.brick_level, "level",
         "2^brick_level bricks per root axis; -1 = auto (finest level - 8, in 3..10)");
+  s.add("octree.brick_size", &o.octree.brick_size, "m",
+        "brick edge at most this (the brick level follows, in 0..10); 0 = use octree.brick_level");
 }
 
 std::optional<Eigen::AlignedBox3d> parse_bbox(const std::string& text) {
@@ -266,6 +271,8 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   std::optional<int> job_brick_level = journal ? journal->fixed_brick_level() : std::nullopt;
   const int brick_level = job_brick_level                      ? *job_brick_level
                           : options.octree.brick_level >= 0    ? options.octree.brick_level
+                          : options.octree.brick_size > 0
+                              ? std::clamp(int(std::ceil(std::log2(root.size / options.octree.brick_size))), 0, 10)
                           : std::isfinite(finest_footprint)    ? auto_brick_level(root, finest_footprint, options.integrate)
                                                                : 4;
   stats.brick_level = brick_level;
@@ -443,42 +450,64 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     if (stats_out) *stats_out = stats;
     return Mesh{};
   }
-  // Brick by brick: the raw field is never in memory at once; the survivors are gathered for the
-  // (still global) tetrahedralization.
-  std::vector<SurfaceVoxel> voxels;
+  // Brick by brick: the raw field is never in memory at once. The survivors go to the brick
+  // extraction's scratch files as each brick is regularized; the global path (when they are few
+  // enough) reads them back.
+  std::optional<ScratchFolder> temporary;
+  if (hooks.scratch.empty()) temporary.emplace("scalefuse-extract");
+  const std::filesystem::path scratch = hooks.scratch.empty() ? temporary->path() : hooks.scratch;
+  const std::size_t limit = map.memory_limit();
+  BrickExtraction bricks(scratch, root, map.brick_level(), options.extract,
+                         limit > 0 ? limit / 4 : std::size_t{256} << 20);
+  std::mutex add_mutex;
   stats.regularize = regularize_bricks(
       map, options.regularize, hooks.progress,
       [&](BrickCoord, std::vector<std::pair<VoxelKey, VoxelData>>&& brick) {
-        for (const auto& [k, v] : brick) {
-          SurfaceVoxel s;
+        std::vector<SurfaceVoxel> voxels(brick.size());
+        for (std::size_t i = 0; i < brick.size(); ++i) {
+          const auto& [k, v] = brick[i];
+          SurfaceVoxel& s = voxels[i];
           s.key = k;
           s.distance = v.distance;
           s.weight = v.weight;
           for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
-          voxels.push_back(s);
         }
+        bricks.add(voxels);
       });
+  map.clear();  // release the field before the tetrahedralization
+  std::size_t survivors = 0;
   for (int l = 0; l <= kMaxLevel; ++l) {
     stats.voxels_fused[l] = stats.regularize.voxels_before[l];
     stats.voxels_regularized[l] = stats.regularize.voxels_after[l];
+    survivors += stats.regularize.voxels_after[l];
   }
-  std::sort(voxels.begin(), voxels.end(), [](const SurfaceVoxel& a, const SurfaceVoxel& b) { return a.key < b.key; });
   end_stage("regularize");
   stats.peak_rss_regularize_bytes = peak_rss_bytes();
-  if (hooks.on_regularized) {
-    hooks.on_regularized(voxels, root);
-    end_stage("export");
+  if (survivors < 4) throw InputError("too few confident voxels to extract a surface (" + std::to_string(survivors) + ")");
+  const bool too_big = limit > 0 && survivors * kDelaunayBytesPerVoxel > limit;
+  const bool by_brick = options.extract.mode == "bricks" || (options.extract.mode == "auto" && too_big);
+  MeshCollector collected;
+  MeshStream& out = hooks.mesh_out ? *hooks.mesh_out : collected;
+  if (hooks.on_regularized || !by_brick) {
+    std::vector<SurfaceVoxel> voxels = bricks.voxels();
+    std::sort(voxels.begin(), voxels.end(), [](const SurfaceVoxel& a, const SurfaceVoxel& b) { return a.key < b.key; });
+    if (hooks.on_regularized) {
+      hooks.on_regularized(voxels, root);
+      end_stage("export");
+    }
+    if (!by_brick) {
+      ExtractOptions extract = options.extract;
+      extract.brick_level = -1;
+      const Mesh mesh = extract_surface(voxels, root, extract, hooks.progress, &stats.extract);
+      std::vector<SurfaceVoxel>().swap(voxels);
+      stream_mesh(mesh, out);
+    }
   }
-  map.clear();  // release the field before the tetrahedralization
-  if (voxels.size() < 4) throw InputError("too few confident voxels to extract a surface (" + std::to_string(voxels.size()) + ")");
-  ExtractOptions extract = options.extract;
-  const bool too_big = map.memory_limit() > 0 && voxels.size() * kDelaunayBytesPerVoxel > map.memory_limit();
-  if (extract.mode == "bricks" || (extract.mode == "auto" && too_big)) extract.brick_level = map.brick_level();
-  Mesh mesh = extract_surface(voxels, root, extract, hooks.progress, &stats.extract);
+  if (by_brick) bricks.run(out, hooks.progress, &stats.extract);
   end_stage("extract");
   stats.peak_rss_bytes = peak_rss_bytes();
   if (stats_out) *stats_out = stats;
-  return mesh;
+  return std::move(collected.mesh);
 }
 
 }  // namespace sf

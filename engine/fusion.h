@@ -4,6 +4,7 @@
 #include <atomic>
 #include <stdexcept>
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
@@ -28,6 +29,8 @@ struct OctreeOptions {
   // data - 8 (bricks of 256 finest cells), clamped to [3, 10], so a brick stays small against the
   // memory budget however wide the scene is.
   int brick_level = -1;
+  // > 0 (metres) and brick_level = -1: the coarsest brick level whose bricks are at most this wide.
+  double brick_size = 0;
   void check() const;
 };
 
@@ -87,6 +90,12 @@ struct FusionHooks {
   // start; later samples outside it are dropped (counted in FusionStats::samples_outside_root).
   // `stop` is not read while following: the feed watches for signals and ends.
   FrameFeed* follow = nullptr;
+  // Stream the mesh here (e.g. a PlyStreamWriter) instead of returning it: the brick-by-brick
+  // extraction never holds it whole.
+  MeshStream* mesh_out = nullptr;
+  // A folder for the extraction's scratch files (e.g. in the job directory); empty: a temporary
+  // folder. Emptied when the extraction ends.
+  std::filesystem::path scratch;
   // Return an empty mesh once the integration is checkpointed (fuse --integrate-only); the stats
   // then hold the integration's figures and the fused voxels per level.
   bool stop_after_integration = false;
@@ -147,7 +156,8 @@ class FusionJournal {
   virtual void interrupted(const IntegrationProgress& progress, BrickMap& map) = 0;
 };
 
-// Runs the fusion in the calling TBB arena. Throws InputError on bad input. With a journal the
+// Runs the fusion in the calling TBB arena and returns the mesh (empty if streamed to
+// hooks.mesh_out). Throws InputError on bad input. With a journal the
 // integration resumes from, and checkpoints into, the journal's job.
 Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats,
           FusionJournal* journal = nullptr);

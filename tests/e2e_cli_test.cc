@@ -136,6 +136,14 @@ TEST(CliValidScene, ExtractionByBricksGivesTheGlobalMeshOnTheRealBunny) {
   EXPECT_EQ(j["extract"]["mode"], "bricks");
   EXPECT_GT(j["extract"]["windows"].get<int>(), 100);
   EXPECT_GT(j["extract"]["window_cells_rejected"].get<int>(), 0);
+  EXPECT_FALSE(fs::exists(fs::path(bricks.string() + ".job") / "scratch")) << "scratch files are removed";
+  // Bricks 4x smaller (level 5, 6 mm): paging, regularization and extraction all cut differently.
+  const fs::path small = root / "small.ply", small_stats = root / "small.json";
+  const CliRun s = fuse(scans, small, config + " --extract bricks --brick-size 0.012 --stats " + small_stats.string());
+  ASSERT_EQ(s.code, 0) << s.output;
+  std::ifstream c(small, std::ios::binary);
+  EXPECT_TRUE(ga == std::string((std::istreambuf_iterator<char>(c)), {})) << "the mesh depends on the brick size";
+  EXPECT_EQ(nlohmann::json::parse(std::ifstream(small_stats))["brick_level"], 5);
   EXPECT_EQ(fuse(scans, root / "bad.ply", config + " --extract sideways").code, 2);
 }
 

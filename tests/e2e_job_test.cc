@@ -345,8 +345,19 @@ TEST(Job, FollowIntegratesDepthMapsAsTheyCompleteInArrivalOrder) {
                            " --follow --settle-seconds 0.5 --poll-seconds 0.1 --threads 2 --checkpoint-every 2 --stats " +
                            (dir / "follow.json").string() + " " + kScene + " --bbox=-0.11,0.02,-0.08,0.08,0.2,0.08",
                        dir / "run");
+  // Each scan arrives once the job has taken the one before: on a loaded machine a slow round of
+  // integration could otherwise see two arrivals at once, and take them in listing order.
+  const auto wait_taken = [&](std::size_t n) {
+    for (int tries = 0; tries < 1200; ++tries) {
+      const CliRun st = scalefuse("status " + job.string() + " --json");
+      if (st.code == 0 && json_of(st.output)["depth_maps"].get<std::size_t>() >= n) return;
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    FAIL() << "the job did not take depth map " << n;
+  };
   for (std::size_t i = 3; i < 10; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(800));
+    wait_taken(i);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
     arrive(i, i == 5);
   }
   // Let the last scan settle, then stop the feed.

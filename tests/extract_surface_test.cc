@@ -406,6 +406,63 @@ TEST(ExtractSurface, BrickByBrickGivesTheGlobalMesh) {
   }
 }
 
+TEST(ExtractSurface, BrickByBrickHandlesExactZerosAndComponentRemoval) {
+  // Zero shells (zero faces, interior zero faces cancelled by two different bricks' cells) and
+  // component removal across pieces: the same bytes as the global extraction.
+  const RootCube root = test_root();
+  const double r = 0.4;
+  for (double q : {0.25, 1.0}) {
+    const auto quantized = [&](int level) {
+      const double step = q * root.cell_size(level);
+      return [step, r](const Eigen::Vector3d& p) { return std::round((p.norm() - r) / step) * step; };
+    };
+    std::vector<SurfaceVoxel> voxels = band(root, 5, 3.0, quantized(5));
+    const std::vector<SurfaceVoxel> fine = band(root, 6, 3.0, quantized(6), [](const Eigen::Vector3d& p) {
+      return p.x() >= 0;
+    });
+    voxels.insert(voxels.end(), fine.begin(), fine.end());
+    for (double snap : {0.0, 0.45}) {
+      ExtractOptions o;
+      o.snap_fraction = snap;
+      ExtractStats global_stats;
+      const Mesh reference = extract_surface(voxels, root, o, nullptr, &global_stats);
+      ASSERT_FALSE(reference.faces.empty());
+      for (int brick_level : {2, 4}) {
+        SCOPED_TRACE("q " + std::to_string(q) + " snap " + std::to_string(snap) + " brick level " +
+                     std::to_string(brick_level));
+        ExtractOptions by_brick = o;
+        by_brick.brick_level = brick_level;
+        ExtractStats st;
+        const Mesh m = extract_surface(voxels, root, by_brick, nullptr, &st);
+        EXPECT_TRUE(same_mesh(m, reference));
+        EXPECT_EQ(st.interior_zero_faces, global_stats.interior_zero_faces);
+        EXPECT_EQ(st.coincident_voxels, global_stats.coincident_voxels);
+      }
+    }
+  }
+  // Two blobs; the smaller is removed as a component. One blob spans several bricks.
+  const Eigen::Vector3d a(-0.25, 0, 0), b(0.2, 0.02, 0);
+  const Field two = [&](const Eigen::Vector3d& p) { return std::min((p - a).norm() - 0.12, (p - b).norm() - 0.08); };
+  const std::vector<SurfaceVoxel> blobs = band(root, 6, 2.5, two);
+  ExtractOptions o;
+  ExtractStats whole;
+  const std::size_t all = extract_surface(blobs, root, o, nullptr, &whole).faces.size();
+  o.min_component_triangles = all / 2;
+  ExtractStats global_stats;
+  const Mesh reference = extract_surface(blobs, root, o, nullptr, &global_stats);
+  ASSERT_EQ(global_stats.removed_components, 1u);
+  for (int brick_level : {1, 3}) {
+    SCOPED_TRACE("blobs, brick level " + std::to_string(brick_level));
+    ExtractOptions by_brick = o;
+    by_brick.brick_level = brick_level;
+    ExtractStats st;
+    const Mesh m = extract_surface(blobs, root, by_brick, nullptr, &st);
+    EXPECT_TRUE(same_mesh(m, reference));
+    EXPECT_EQ(st.removed_components, 1u);
+    EXPECT_EQ(st.removed_triangles, global_stats.removed_triangles);
+  }
+}
+
 TEST(ExtractSurface, ProgressIsReported) {
   const RootCube root = test_root();
   const std::vector<SurfaceVoxel> voxels = band(root, 5, 2.5, sphere({0, 0, 0}, 0.3));

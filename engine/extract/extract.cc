@@ -35,22 +35,29 @@
 #include <string>
 
 #include "engine/error.h"
-#include "engine/extract/certificate.h"
+#include "engine/extract/brick_extract.h"
+#include "storage/mailbox.h"
 #include "engine/extract/delaunay.h"
 #include "engine/extract/marching_tets.h"
+#include "engine/extract/voxel_set.h"
 
 namespace sf {
 
-using extract_detail::Ball;
-using extract_detail::Certificate;
 using extract_detail::crossing_fraction;
 using extract_detail::DelaunayTetrahedralization;
 using extract_detail::FieldView;
 using extract_detail::MtTriangle;
 using extract_detail::MtVertex;
-using extract_detail::Occupancy;
-using extract_detail::Outsiders;
 using extract_detail::Tet;
+using extract_detail::Attributes;
+using extract_detail::cell_distances;
+using extract_detail::cell_kind;
+using extract_detail::CellKind;
+using extract_detail::crossing_attributes;
+using extract_detail::keep_cell;
+using extract_detail::to_byte;
+using extract_detail::voxel_attributes;
+using extract_detail::Voxels;
 
 void ExtractOptions::check() const {
   if (neighbourhood_n < 0) {
@@ -83,17 +90,6 @@ bool are_neighbours(VoxelKey a, VoxelKey b, int n) {
 namespace {
 
 constexpr double kStages = 4;  // "extract" progress steps: snap, march, weld, clean
-
-// The voxels in key order, with the attributes the output interpolates.
-struct Voxels {
-  std::vector<VoxelKey> key;
-  std::vector<Eigen::Vector3d> position;
-  std::vector<float> distance, weight, scale;
-  std::vector<std::array<float, 3>> colour;
-
-  std::size_t size() const { return key.size(); }
-  FieldView view() const { return FieldView{position.data(), distance.data()}; }
-};
 
 std::string describe(VoxelKey k) {
   std::ostringstream s;
@@ -185,27 +181,6 @@ Voxels prepare(const std::vector<SurfaceVoxel>& in, const RootCube& root, Extrac
   return v;
 }
 
-// 7.1 on one cell: all six edges must join neighbouring voxels.
-bool keep_cell(const Tet& t, const Voxels& v, int n) {
-  for (int i = 0; i < 4; ++i) {
-    for (int j = i + 1; j < 4; ++j) {
-      if (!are_neighbours(v.key[t[i]], v.key[t[j]], n)) return false;
-    }
-  }
-  return true;
-}
-
-std::array<float, 4> cell_distances(const Tet& t, const std::vector<float>& d) {
-  return {d[t[0]], d[t[1]], d[t[2]], d[t[3]]};
-}
-
-// Which candidate list a kept cell goes to; kNever: it can never emit.
-enum class CellKind { kNever, kMixed, kNegativeOnly };
-CellKind cell_kind(const std::array<float, 4>& d) {
-  if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0)) return CellKind::kNever;
-  return (d[0] > 0 || d[1] > 0 || d[2] > 0 || d[3] > 0) ? CellKind::kMixed : CellKind::kNegativeOnly;
-}
-
 // The kept cells (7.1) that can emit, before or after snapping. Snapping only turns distances
 // into 0, so a cell without a negative voxel never emits, and a cell without a positive one can
 // only become the negative side of a zero face (1,3,0).
@@ -258,218 +233,6 @@ Candidates candidate_cells(const Voxels& v, const ExtractOptions& options, const
     l.c = Candidates();  // release as we go
   }
   return out;
-}
-
-// Brick by brick (options.brick_level = B >= 0). Each voxel belongs to the brick of its position.
-// A cell is owned by its coarsest vertex (ties: the lowest key), and by that vertex's brick X. By
-// 7.1 every other vertex v of a kept cell lies within h(owner) + n h(v) <= (1 + n) h(Lmin(X)) of
-// the owner per axis, Lmin(X) being the coarsest level in X. So the window of X, every voxel
-// within that reach of X's closed box, holds all four vertices of each kept cell X owns, and a
-// cell of the global triangulation with its vertices in the window is a cell of the window's
-// triangulation (its circumsphere is empty of every voxel, so of the window's; CGAL's symbolic
-// perturbation depends on the five points of a test alone). Conversely a window cell is global iff
-// no voxel outside the window is in its sphere (certificate.h): the voxels of one more brick layer
-// are tested exactly, an occupancy summary stands for the rest. A window whose certificate cannot
-// decide is redone with twice the reach (at worst the whole field, where every cell is global).
-// The union of the owned, kept, candidate cells is then exactly the global one.
-
-Candidates candidate_cells_by_brick(const Voxels& v, const ExtractOptions& options, const ProgressFn& progress,
-                                    ExtractStats* st) {
-  using extract_detail::LatticePoint;
-  const int B = options.brick_level, n = options.neighbourhood_n;
-  int finest = 0;
-  for (VoxelKey k : v.key) finest = std::max(finest, k.level());
-  // Lattice of the finer of the finest level and the brick level, so that bricks are whole
-  // lattice cells (a uniform scaling: the same Delaunay complex as the global path's lattice).
-  const int G = std::max(finest, B);
-  const std::int64_t side = std::int64_t{1} << G, brick_side = std::int64_t{1} << (G - B);
-  std::vector<LatticePoint> lattice(v.size());
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_brick(v.size());  // (brick id, voxel)
-  const auto brick_id = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
-    return (std::uint64_t(z) << 40) | (std::uint64_t(y) << 20) | std::uint64_t(x);
-  };
-  const std::int64_t last_brick = (std::int64_t{1} << B) - 1;
-  // The brick of a lattice point (the last brick also takes the lattice's far faces), packed.
-  const auto brick_of_point = [&](const LatticePoint& p) {
-    std::int64_t b[3];
-    for (int a = 0; a < 3; ++a) b[a] = std::min<std::int64_t>(p[a] / brick_side, last_brick);
-    return brick_id(b[0], b[1], b[2]);
-  };
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, v.size()), [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const VoxelKey k = v.key[i];
-      const int shift = G - k.level();
-      lattice[i] = {std::int32_t(k.x()) << shift, std::int32_t(k.y()) << shift, std::int32_t(k.z()) << shift};
-      by_brick[i] = {brick_of_point(lattice[i]), std::uint32_t(i)};
-    }
-  });
-  tbb::parallel_sort(by_brick.begin(), by_brick.end());
-  Occupancy occ;
-  occ.side = std::max<std::int64_t>(1, brick_side / 16);
-  occ.cells.resize(v.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, v.size()), [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t i = r.begin(); i != r.end(); ++i)
-      occ.cells[i] = Occupancy::pack(lattice[i][0] / occ.side, lattice[i][1] / occ.side, lattice[i][2] / occ.side);
-  });
-  tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
-  occ.cells.erase(std::unique(occ.cells.begin(), occ.cells.end()), occ.cells.end());
-  occ.cells.shrink_to_fit();
-  std::vector<std::size_t> starts;  // first entry of each brick in by_brick, then the end
-  std::vector<std::uint64_t> ids;   // each brick's id, sorted
-  for (std::size_t i = 0; i < by_brick.size(); ++i)
-    if (i == 0 || by_brick[i].first != by_brick[i - 1].first) {
-      starts.push_back(i);
-      ids.push_back(by_brick[i].first);
-    }
-  starts.push_back(by_brick.size());
-  const auto find_brick = [&](std::uint64_t id) -> std::pair<std::size_t, std::size_t> {
-    const auto it = std::lower_bound(ids.begin(), ids.end(), id);
-    if (it == ids.end() || *it != id) return {0, 0};
-    const std::size_t k = std::size_t(it - ids.begin());
-    return {starts[k], starts[k + 1]};
-  };
-
-  struct Local {
-    Candidates c;
-    std::size_t tetrahedra = 0, kept = 0, windows = 0, points = 0, regrown = 0, rejected = 0;
-  };
-  tbb::enumerable_thread_specific<Local> locals;
-  const std::size_t bricks = starts.size() - 1;
-  std::mutex progress_mutex;
-  std::size_t bricks_done = 0;
-  report(progress, "tetrahedralize", 0, double(bricks));
-  tbb::parallel_for(std::size_t(0), bricks, [&](std::size_t bi) {
-    Local& local = locals.local();
-    const std::uint64_t id = ids[bi];
-    const std::int64_t X[3] = {std::int64_t(id & 0xFFFFF), std::int64_t((id >> 20) & 0xFFFFF), std::int64_t(id >> 40)};
-    int lmin = kMaxLevel;
-    for (std::size_t i = starts[bi]; i < starts[bi + 1]; ++i) lmin = std::min(lmin, v.key[by_brick[i].second].level());
-    std::int64_t reach = (1 + n) * (std::int64_t{1} << (G - lmin));
-    for (;;) {
-      // The window: every voxel within `reach` of X's closed box (clipped to the lattice).
-      std::int64_t lo[3], hi[3], blo[3], bhi[3];
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::max<std::int64_t>(0, X[a] * brick_side - reach);
-        hi[a] = std::min<std::int64_t>(side, (X[a] + 1) * brick_side + reach);
-        blo[a] = std::min(lo[a] / brick_side, last_brick);
-        bhi[a] = std::min(hi[a] / brick_side, last_brick);
-      }
-      // Gathered: the window's bricks and one more layer, whose other voxels certify exactly.
-      std::int64_t glo[3], ghi[3];
-      for (int a = 0; a < 3; ++a) {
-        blo[a] = std::max<std::int64_t>(0, blo[a] - 1);
-        bhi[a] = std::min(bhi[a] + 1, last_brick);
-        glo[a] = blo[a] == 0 ? std::int64_t{-1} << 40 : blo[a] * brick_side;
-        ghi[a] = bhi[a] == last_brick ? std::int64_t{1} << 40 : (bhi[a] + 1) * brick_side - 1;
-      }
-      std::vector<std::uint32_t> members;
-      Outsiders outsiders;
-      for (std::int64_t z = blo[2]; z <= bhi[2]; ++z)
-        for (std::int64_t y = blo[1]; y <= bhi[1]; ++y)
-          for (std::int64_t x = blo[0]; x <= bhi[0]; ++x) {
-            const auto [b, e] = find_brick(brick_id(x, y, z));
-            for (std::size_t i = b; i < e; ++i) {
-              const LatticePoint& p = lattice[by_brick[i].second];
-              if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
-                members.push_back(by_brick[i].second);
-              else
-                outsiders.points.push_back({Occupancy::pack(p[0] / occ.side, p[1] / occ.side, p[2] / occ.side), p});
-            }
-          }
-      std::sort(outsiders.points.begin(), outsiders.points.end());
-      std::sort(members.begin(), members.end());  // local index order = key order
-      std::vector<LatticePoint> points(members.size());
-      for (std::size_t i = 0; i < members.size(); ++i) points[i] = lattice[members[i]];
-      const bool whole = lo[0] == 0 && lo[1] == 0 && lo[2] == 0 && hi[0] == side && hi[1] == side && hi[2] == side;
-      Local mine;
-      bool certified = true;
-      {
-        const DelaunayTetrahedralization dt(points, false, nullptr);
-        dt.for_each_cell([&](const Tet& local_cell) {
-          if (!certified) return;
-          Tet t;
-          int owner = 0;
-          for (int k = 0; k < 4; ++k) {
-            t[k] = members[local_cell[k]];
-            const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
-            if (lk < lo_ || (lk == lo_ && t[k] < t[owner])) owner = k;
-          }
-          if (brick_of_point(lattice[t[owner]]) != id) return;
-          ++mine.tetrahedra;
-          if (!keep_cell(t, v, n)) return;
-          ++mine.kept;
-          const CellKind kind = cell_kind(cell_distances(t, v.distance));
-          if (kind == CellKind::kNever) return;
-          const LatticePoint* corners[4] = {&points[local_cell[0]], &points[local_cell[1]], &points[local_cell[2]],
-                                            &points[local_cell[3]]};
-          if (!whole) {
-            Ball ball;
-            const Certificate c = circumball(corners, &ball) ? certify(ball, corners, lo, hi, glo, ghi, outsiders, occ)
-                                                             : Certificate::kUnknown;
-            if (c == Certificate::kNotGlobal) {
-              ++mine.rejected;
-              return;
-            }
-            if (c == Certificate::kUnknown) {
-              certified = false;
-              return;
-            }
-          }
-          (kind == CellKind::kMixed ? mine.c.mixed : mine.c.negative_only).push_back(t);
-        });
-      }
-      ++local.windows;
-      local.points += points.size();
-      if (!certified) {
-        ++local.regrown;
-        reach *= 2;
-        continue;
-      }
-      local.tetrahedra += mine.tetrahedra;
-      local.kept += mine.kept;
-      local.rejected += mine.rejected;
-      local.c.mixed.insert(local.c.mixed.end(), mine.c.mixed.begin(), mine.c.mixed.end());
-      local.c.negative_only.insert(local.c.negative_only.end(), mine.c.negative_only.begin(), mine.c.negative_only.end());
-      break;
-    }
-    std::lock_guard lock(progress_mutex);
-    report(progress, "tetrahedralize", double(++bricks_done), double(bricks));
-  });
-  Candidates out;
-  for (Local& l : locals) {
-    st->tetrahedra += l.tetrahedra;
-    st->kept_tetrahedra += l.kept;
-    st->windows += l.windows;
-    st->window_points += l.points;
-    st->windows_regrown += l.regrown;
-    st->window_cells_rejected += l.rejected;
-    out.mixed.insert(out.mixed.end(), l.c.mixed.begin(), l.c.mixed.end());
-    out.negative_only.insert(out.negative_only.end(), l.c.negative_only.begin(), l.c.negative_only.end());
-    l.c = Candidates();
-  }
-  return out;
-}
-
-// Interpolated attributes of a crossing or a voxel.
-struct Attributes {
-  Eigen::Vector3d position;
-  std::array<float, 3> colour;
-  float weight, scale;
-};
-
-Attributes voxel_attributes(const Voxels& v, std::uint32_t i) {
-  return {v.position[i], v.colour[i], v.weight[i], v.scale[i]};
-}
-
-Attributes crossing_attributes(const Voxels& v, std::uint32_t lo, std::uint32_t hi) {
-  const double t = crossing_fraction(v.distance[lo], v.distance[hi]);
-  const auto mix = [t](float a, float b) { return float(double(a) + t * (double(b) - double(a))); };
-  Attributes a;
-  a.position = extract_detail::lerp(v.position[lo], v.position[hi], t);
-  for (int c = 0; c < 3; ++c) a.colour[c] = mix(v.colour[lo][c], v.colour[hi][c]);
-  a.weight = mix(v.weight[lo], v.weight[hi]);
-  a.scale = mix(v.scale[lo], v.scale[hi]);
-  return a;
 }
 
 // 7.2 snapping. Candidates are packed as (fraction as float bits, other voxel index): for
@@ -584,9 +347,8 @@ std::vector<IdTriangle> march(const Voxels& v, const Candidates& cells, ExtractS
   return triangles;
 }
 
-std::uint8_t to_byte(float c) { return std::uint8_t(std::lround(std::clamp(c, 0.0f, 255.0f))); }
-
-// Output vertices = the sorted unique identities; faces index them.
+// Output vertices = the unique identities in output order (voxel_set.h: by the Morton code of
+// the lower voxel's position, then by identity); faces index them.
 Mesh weld(const Voxels& v, const std::vector<IdTriangle>& triangles) {
   std::vector<std::uint64_t> ids(3 * triangles.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size()), [&](const tbb::blocked_range<std::size_t>& r) {
@@ -608,10 +370,27 @@ Mesh weld(const Voxels& v, const std::vector<IdTriangle>& triangles) {
       first[a] = std::uint32_t(k);
     }
   }
+  // rank[p]: output index of ids[p]. Identities sorted by their number are already in key order
+  // within one lower voxel, so the output order only regroups voxels by Morton code.
+  std::vector<std::uint32_t> order(ids.size()), rank(ids.size());
+  std::iota(order.begin(), order.end(), std::uint32_t{0});
+  {
+    std::vector<std::uint64_t> home(v.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, v.size()), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i) home[i] = extract_detail::home_code(v.key[i]);
+    });
+    tbb::parallel_sort(order.begin(), order.end(), [&](std::uint32_t p, std::uint32_t q) {
+      const std::uint64_t hp = home[ids[p] >> 32], hq = home[ids[q] >> 32];
+      return hp != hq ? hp < hq : ids[p] < ids[q];
+    });
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size()), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t j = r.begin(); j != r.end(); ++j) rank[order[j]] = std::uint32_t(j);
+  });
   const auto index_of = [&](std::uint64_t id) {
     const std::size_t a = std::size_t(id >> 32);
     const auto begin = ids.begin() + first[a], end = ids.begin() + first[a + 1];
-    return std::uint32_t(std::lower_bound(begin, end, id) - ids.begin());
+    return rank[std::size_t(std::lower_bound(begin, end, id) - ids.begin())];
   };
 
   Mesh mesh;
@@ -627,7 +406,7 @@ Mesh weld(const Voxels& v, const std::vector<IdTriangle>& triangles) {
   mesh.scale.resize(ids.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ids.size()), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const MtVertex id = MtVertex::from_id(ids[i]);
+      const MtVertex id = MtVertex::from_id(ids[order[i]]);
       const Attributes a = id.a == id.b ? voxel_attributes(v, id.a) : crossing_attributes(v, id.a, id.b);
       mesh.vertices[i] = a.position.cast<float>();
       mesh.colours[i] = {to_byte(a.colour[0]), to_byte(a.colour[1]), to_byte(a.colour[2])};
@@ -710,13 +489,19 @@ void sort_faces(Mesh& mesh) {
 Mesh extract_surface(const std::vector<SurfaceVoxel>& voxels, const RootCube& root, const ExtractOptions& options,
                      const ProgressFn& progress, ExtractStats* stats) {
   options.check();
+  if (options.brick_level >= 0) {
+    const ScratchFolder scratch("scalefuse-extract");
+    BrickExtraction bricks(scratch.path(), root, options.brick_level, options, std::size_t{256} << 20);
+    bricks.add(voxels);
+    MeshCollector mesh;
+    bricks.run(mesh, progress, stats);
+    return std::move(mesh.mesh);
+  }
   ExtractStats st;
   Voxels v = prepare(voxels, root, &st);
   st.voxels = v.size();
 
-  st.by_brick = options.brick_level >= 0;
-  Candidates cells = options.brick_level >= 0 ? candidate_cells_by_brick(v, options, progress, &st)
-                                              : candidate_cells(v, options, progress, &st);
+  Candidates cells = candidate_cells(v, options, progress, &st);
   report(progress, "extract", 0, kStages);
   st.snapped_voxels = snap_voxels(v, cells.mixed, options.snap_fraction);
   report(progress, "extract", 1, kStages);

@@ -458,53 +458,78 @@ void write_ply_mesh(const fs::path& path, const Mesh& mesh) {
   check_size(mesh.colours.size(), "colours");
   check_size(mesh.confidence.size(), "confidences");
   check_size(mesh.scale.size(), "scales");
-  if (nv > std::size_t(std::numeric_limits<std::int32_t>::max()))
-    throw std::invalid_argument(path.string() + ": too many vertices for PLY int indices");
   for (const auto& f : mesh.faces)
     for (std::uint32_t v : f)
       if (v >= nv) throw std::invalid_argument(path.string() + ": face refers to a missing vertex");
-  static_assert(std::endian::native == std::endian::little, "the writer emits host-order floats as little-endian");
-
   const bool colour = !mesh.colours.empty(), conf = !mesh.confidence.empty(), scale = !mesh.scale.empty();
-  std::string header = "ply\nformat binary_little_endian 1.0\ncomment written by scalefuse\n";
-  header += "element vertex " + std::to_string(nv) + "\n";
-  header += "property float x\nproperty float y\nproperty float z\n";
-  if (colour) header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
-  if (conf) header += "property float confidence\n";
-  if (scale) header += "property float scale\n";
-  header += "element face " + std::to_string(mesh.faces.size()) + "\n";
-  header += "property list uchar int vertex_indices\nend_header\n";
+  PlyStreamWriter out(path, colour, conf, scale);
+  out.begin(nv, mesh.faces.size());
+  for (std::size_t i = 0; i < nv; ++i)
+    out.vertex(mesh.vertices[i], colour ? mesh.colours[i] : Rgb8{}, conf ? mesh.confidence[i] : 0.f,
+               scale ? mesh.scale[i] : 0.f);
+  for (const auto& f : mesh.faces) out.face(f);
+  out.end();
+}
 
-  AtomicFile file(path);
-  file.write(header);
-  std::vector<char> buf;
-  buf.reserve(1 << 20);
-  auto put = [&](const void* p, std::size_t n) {
-    const char* c = static_cast<const char*>(p);
-    buf.insert(buf.end(), c, c + n);
-  };
-  auto drain = [&](bool force) {
-    if (force || buf.size() >= (1 << 20) - 64) {
-      file.write(buf.data(), buf.size());
-      buf.clear();
-    }
-  };
-  for (std::size_t i = 0; i < nv; ++i) {
-    put(mesh.vertices[i].data(), 3 * sizeof(float));
-    if (colour) put(mesh.colours[i].data(), 3);
-    if (conf) put(&mesh.confidence[i], sizeof(float));
-    if (scale) put(&mesh.scale[i], sizeof(float));
-    drain(false);
-  }
-  for (const auto& f : mesh.faces) {
-    const std::uint8_t n = 3;
-    const std::int32_t idx[3] = {std::int32_t(f[0]), std::int32_t(f[1]), std::int32_t(f[2])};
-    put(&n, 1);
-    put(idx, sizeof(idx));
-    drain(false);
-  }
-  drain(true);
-  file.commit();
+PlyStreamWriter::PlyStreamWriter(fs::path path, bool colour, bool confidence, bool scale)
+    : path_(std::move(path)), colour_(colour), confidence_(confidence), scale_(scale) {}
+
+PlyStreamWriter::~PlyStreamWriter() = default;
+
+void PlyStreamWriter::begin(std::size_t vertices, std::size_t faces) {
+  static_assert(std::endian::native == std::endian::little, "the writer emits host-order floats as little-endian");
+  if (vertices > std::size_t(std::numeric_limits<std::int32_t>::max()))
+    throw std::invalid_argument(path_.string() + ": too many vertices for PLY int indices");
+  vertices_ = vertices;
+  faces_ = faces;
+  std::string header = "ply\nformat binary_little_endian 1.0\ncomment written by scalefuse\n";
+  header += "element vertex " + std::to_string(vertices) + "\n";
+  header += "property float x\nproperty float y\nproperty float z\n";
+  if (colour_) header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+  if (confidence_) header += "property float confidence\n";
+  if (scale_) header += "property float scale\n";
+  header += "element face " + std::to_string(faces) + "\n";
+  header += "property list uchar int vertex_indices\nend_header\n";
+  file_ = std::make_unique<AtomicFile>(path_);
+  file_->write(header);
+  buffer_.reserve(1 << 20);
+}
+
+void PlyStreamWriter::put(const void* p, std::size_t n) {
+  const char* c = static_cast<const char*>(p);
+  buffer_.insert(buffer_.end(), c, c + n);
+}
+
+void PlyStreamWriter::drain() {
+  file_->write(buffer_.data(), buffer_.size());
+  buffer_.clear();
+}
+
+void PlyStreamWriter::vertex(const Eigen::Vector3f& position, const Rgb8& colour, float confidence, float scale) {
+  if (vertices_seen_++ >= vertices_) throw std::logic_error(path_.string() + ": more vertices than announced");
+  put(position.data(), 3 * sizeof(float));
+  if (colour_) put(colour.data(), 3);
+  if (confidence_) put(&confidence, sizeof(float));
+  if (scale_) put(&scale, sizeof(float));
+  if (buffer_.size() >= (1 << 20) - 64) drain();
+}
+
+void PlyStreamWriter::face(const std::array<std::uint32_t, 3>& f) {
+  if (vertices_seen_ != vertices_ || faces_seen_++ >= faces_)
+    throw std::logic_error(path_.string() + ": face out of order or more faces than announced");
+  const std::uint8_t n = 3;
+  const std::int32_t idx[3] = {std::int32_t(f[0]), std::int32_t(f[1]), std::int32_t(f[2])};
+  put(&n, 1);
+  put(idx, sizeof(idx));
+  if (buffer_.size() >= (1 << 20) - 64) drain();
+}
+
+void PlyStreamWriter::end() {
+  if (vertices_seen_ != vertices_ || faces_seen_ != faces_)
+    throw std::logic_error(path_.string() + ": fewer vertices or faces than announced");
+  drain();
+  file_->commit();
+  file_.reset();
 }
 
 }  // namespace sf

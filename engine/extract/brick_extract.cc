@@ -1,0 +1,844 @@
+#include "engine/extract/brick_extract.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <cstring>
+#include <list>
+#include <mutex>
+#include <numeric>
+#include <sstream>
+#include <unordered_map>
+
+#include "engine/error.h"
+#include "engine/extract/certificate.h"
+#include "engine/extract/delaunay.h"
+#include "engine/extract/marching_tets.h"
+#include "engine/extract/voxel_set.h"
+#include "storage/mailbox.h"
+
+namespace sf {
+
+using namespace extract_detail;
+
+namespace {
+
+// --- Records exchanged between passes (plain data, zero-padded) --------------------------------
+
+// 7.2: voxel `target` may snap onto its crossing with `other` at this fraction of their edge;
+// the attributes are the crossing's, computed on the original distances.
+struct SnapOffer {
+  std::uint64_t target, other;
+  std::uint32_t fraction_bits, pad;
+  double position[3];
+  float colour[3], weight, scale, pad2;
+};
+// A voxel's decided snap.
+struct Snap {
+  std::uint64_t key;
+  double position[3];
+  float colour[3], weight, scale, pad;
+};
+// An output vertex sent to its home brick by the brick whose cells use it.
+struct VertexRequest {
+  std::uint64_t a, b;    // voxel keys, a <= b
+  std::uint64_t src;     // requesting brick (Morton code)
+  std::uint32_t local;   // its index in the requester's vertex list
+  float position[3];
+  std::uint8_t colour[3], pad;
+  float confidence, scale;
+};
+struct PlyVertex {
+  float position[3];
+  std::uint8_t colour[3], pad;
+  float confidence, scale;
+};
+// The answer: vertex `local` of the requester is number `rank` of home brick `home`.
+struct Rank {
+  std::uint32_t local, home, rank;
+};
+struct Face {
+  std::uint32_t v[3];
+  std::uint32_t zero;  // a zero face (three zero voxels), cancelled if it meets its twin
+};
+
+std::uint32_t float_bits(float f) {
+  std::uint32_t u;
+  std::memcpy(&u, &f, 4);
+  return u;
+}
+
+std::string describe(VoxelKey k) {
+  std::ostringstream s;
+  s << "level " << k.level() << " (" << k.x() << ", " << k.y() << ", " << k.z() << ")";
+  return s.str();
+}
+
+// One brick's voxels in key order, with their lattice points (level G).
+struct BrickVoxels {
+  std::vector<SurfaceVoxel> voxels;
+  std::vector<LatticePoint> points;
+  std::size_t bytes() const { return voxels.capacity() * sizeof(SurfaceVoxel) + points.capacity() * sizeof(LatticePoint); }
+};
+
+struct BrickInfo {
+  std::uint64_t code;  // Morton code of the brick coordinates = its place in the output
+  std::uint32_t x, y, z;
+  int lmin;            // coarsest level of its voxels
+};
+
+}  // namespace
+
+struct BrickExtraction::Impl {
+  std::filesystem::path scratch;
+  RootCube root;
+  int B;  // brick level
+  ExtractOptions options;
+  std::size_t cache_bytes;
+  std::atomic<int> finest{0};
+  std::atomic<std::size_t> added{0};
+  std::unique_ptr<Mailbox> incoming;
+
+  // Set by prepare():
+  int G = 0;                      // lattice level: max(finest, B)
+  std::int64_t side = 0, brick_side = 0;
+  std::vector<BrickInfo> bricks;  // bricks with voxels, by code
+  Occupancy occ;
+  std::unique_ptr<Mailbox> survivors;
+
+  // The decoded-brick cache of the windows (least recently used out).
+  std::mutex cache_mutex;
+  std::list<std::pair<std::uint64_t, std::shared_ptr<const BrickVoxels>>> lru;
+  std::unordered_map<std::uint64_t, decltype(lru)::iterator> cached;
+  std::size_t cached_bytes = 0;
+
+  std::uint64_t brick_code_of_key(VoxelKey k) const { return home_code(k) >> (3 * (kMaxLevel - B)); }
+  std::ptrdiff_t ordinal(std::uint64_t code) const {
+    const auto it = std::lower_bound(bricks.begin(), bricks.end(), code,
+                                     [](const BrickInfo& b, std::uint64_t c) { return b.code < c; });
+    return it != bricks.end() && it->code == code ? it - bricks.begin() : -1;
+  }
+  LatticePoint lattice(VoxelKey k) const {
+    const int s = G - k.level();
+    return {std::int32_t(k.x()) << s, std::int32_t(k.y()) << s, std::int32_t(k.z()) << s};
+  }
+  std::shared_ptr<const BrickVoxels> load(std::uint64_t code);
+  void prepare(const ProgressFn& progress, ExtractStats* st);
+};
+
+BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level,
+                                 const ExtractOptions& options, std::size_t cache_bytes)
+    : impl_(std::make_unique<Impl>()) {
+  options.check();
+  if (brick_level < 0 || brick_level > kMaxLevel)
+    throw InputError("extract: brick level must be in [0, " + std::to_string(kMaxLevel) + "], got " +
+                     std::to_string(brick_level));
+  impl_->scratch = std::move(scratch);
+  impl_->root = root;
+  impl_->B = brick_level;
+  impl_->options = options;
+  impl_->cache_bytes = cache_bytes;
+  impl_->incoming = std::make_unique<Mailbox>(impl_->scratch, "incoming");
+}
+
+BrickExtraction::~BrickExtraction() {
+  const std::filesystem::path scratch = impl_->scratch;
+  impl_.reset();  // the mailboxes delete their files
+  std::error_code ec;
+  std::filesystem::remove(scratch, ec);  // only if empty: the folder may be the caller's
+}
+
+void BrickExtraction::add(const std::vector<SurfaceVoxel>& voxels) {
+  Impl& m = *impl_;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> order(voxels.size());
+  int finest = 0;
+  for (std::size_t i = 0; i < voxels.size(); ++i) {
+    const VoxelKey k = voxels[i].key;
+    if (!valid_voxel(k.level(), k.x(), k.y(), k.z()) || (k.bits >> 62) != 0) {
+      std::ostringstream s;
+      s << "extract: voxel with an invalid key (bits 0x" << std::hex << k.bits << ")";
+      throw InputError(s.str());
+    }
+    finest = std::max(finest, k.level());
+    order[i] = {m.brick_code_of_key(k), std::uint32_t(i)};
+  }
+  std::sort(order.begin(), order.end());
+  std::vector<SurfaceVoxel> group;
+  for (std::size_t i = 0; i < order.size();) {
+    const std::uint64_t code = order[i].first;
+    group.clear();
+    for (; i < order.size() && order[i].first == code; ++i) group.push_back(voxels[order[i].second]);
+    m.incoming->post(code, 0, group);
+  }
+  int seen = m.finest.load();
+  while (finest > seen && !m.finest.compare_exchange_weak(seen, finest)) {
+  }
+  m.added += voxels.size();
+}
+
+std::vector<SurfaceVoxel> BrickExtraction::voxels() const {
+  std::vector<SurfaceVoxel> all;
+  all.reserve(impl_->added.load());
+  for (std::uint64_t code : impl_->incoming->destinations()) {
+    const std::vector<SurfaceVoxel> b = impl_->incoming->collect<SurfaceVoxel>(code);
+    all.insert(all.end(), b.begin(), b.end());
+  }
+  return all;
+}
+
+std::shared_ptr<const BrickVoxels> BrickExtraction::Impl::load(std::uint64_t code) {
+  {
+    std::lock_guard lock(cache_mutex);
+    const auto it = cached.find(code);
+    if (it != cached.end()) {
+      lru.splice(lru.begin(), lru, it->second);
+      return it->second->second;
+    }
+  }
+  auto b = std::make_shared<BrickVoxels>();
+  b->voxels = survivors->collect<SurfaceVoxel>(code);
+  b->points.resize(b->voxels.size());
+  for (std::size_t i = 0; i < b->voxels.size(); ++i) b->points[i] = lattice(b->voxels[i].key);
+  std::lock_guard lock(cache_mutex);
+  if (cached.count(code)) return cached[code]->second;
+  lru.emplace_front(code, b);
+  cached[code] = lru.begin();
+  cached_bytes += b->bytes();
+  while (cached_bytes > cache_bytes && lru.size() > 1) {
+    cached_bytes -= lru.back().second->bytes();
+    cached.erase(lru.back().first);
+    lru.pop_back();
+  }
+  return b;
+}
+
+// Pass 0: each brick's voxels sorted and checked, coarser twins dropped, then indexed.
+void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st) {
+  G = std::max(finest.load(), B);
+  side = std::int64_t{1} << G;
+  brick_side = std::int64_t{1} << (G - B);
+  occ.side = std::max<std::int64_t>(1, brick_side / 8);
+  survivors = std::make_unique<Mailbox>(scratch, "survivors");
+  const std::vector<std::uint64_t> codes = incoming->destinations();
+  bricks.resize(codes.size());
+  std::vector<std::vector<std::uint64_t>> cells(codes.size());
+  std::atomic<std::size_t> kept{0}, dropped{0}, done{0};
+  tbb::parallel_for(std::size_t(0), codes.size(), [&](std::size_t bi) {
+    std::vector<SurfaceVoxel> v = incoming->collect<SurfaceVoxel>(codes[bi]);
+    std::sort(v.begin(), v.end(), [](const SurfaceVoxel& a, const SurfaceVoxel& b) { return a.key < b.key; });
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      const auto fail = [&](const std::string& what) {
+        throw InputError("extract: voxel at " + describe(v[i].key) + " " + what);
+      };
+      if (i > 0 && v[i].key == v[i - 1].key) fail("is given twice");
+      if (!std::isfinite(v[i].distance)) fail("has a non-finite distance");
+      if (!std::isfinite(v[i].weight)) fail("has a non-finite weight");
+      for (float c : v[i].colour)
+        if (!std::isfinite(c)) fail("has a non-finite colour");
+    }
+    // A voxel coincides with the voxels its even coordinates reach by halving, all in this brick;
+    // keep the finest (section 6 has normally dropped the others already).
+    std::vector<std::uint8_t> drop(v.size(), 0);
+    for (const SurfaceVoxel& s : v) {
+      VoxelKey k = s.key;
+      while (k.has_coarser_twin()) {
+        k = k.coarser_twin();
+        const auto it = std::lower_bound(v.begin(), v.end(), k, [](const SurfaceVoxel& a, VoxelKey b) { return a.key < b; });
+        if (it != v.end() && it->key == k) drop[std::size_t(it - v.begin())] = 1;
+      }
+    }
+    std::vector<SurfaceVoxel> out;
+    out.reserve(v.size());
+    int lmin = kMaxLevel;
+    std::vector<std::uint64_t>& c = cells[bi];
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      if (drop[i]) continue;
+      out.push_back(v[i]);
+      lmin = std::min(lmin, v[i].key.level());
+      const LatticePoint p = lattice(v[i].key);
+      c.push_back(Occupancy::pack(p[0] / occ.side, p[1] / occ.side, p[2] / occ.side));
+    }
+    std::sort(c.begin(), c.end());
+    c.erase(std::unique(c.begin(), c.end()), c.end());
+    kept += out.size();
+    dropped += v.size() - out.size();
+    const VoxelKey first = out.front().key;
+    const int s = G - first.level();
+    const std::int64_t last = (std::int64_t{1} << B) - 1;
+    const auto brick_axis = [&](std::uint32_t coord) {
+      return std::uint32_t(std::min<std::int64_t>((std::int64_t(coord) << s) / brick_side, last));
+    };
+    bricks[bi] = {codes[bi], brick_axis(first.x()), brick_axis(first.y()), brick_axis(first.z()), lmin};
+    survivors->post(codes[bi], codes[bi], out);
+    report(progress, "prepare", double(++done), double(codes.size()));
+  });
+  std::size_t total = 0;
+  for (const auto& c : cells) total += c.size();
+  occ.cells.reserve(total);
+  for (auto& c : cells) {
+    occ.cells.insert(occ.cells.end(), c.begin(), c.end());
+    std::vector<std::uint64_t>().swap(c);
+  }
+  tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
+  occ.cells.erase(std::unique(occ.cells.begin(), occ.cells.end()), occ.cells.end());
+  incoming.reset();
+  st->voxels = kept.load();
+  st->coincident_voxels = dropped.load();
+}
+
+void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractStats* stats) {
+  Impl& m = *impl_;
+  ExtractStats st;
+  st.by_brick = true;
+  if (m.added.load() < 4)
+    throw InputError("too few confident voxels to extract a surface (" + std::to_string(m.added.load()) + ")");
+  m.prepare(progress, &st);
+  const int n = m.options.neighbourhood_n;
+  const double snap_fraction = m.options.snap_fraction;
+  const std::int64_t side = m.side, brick_side = m.brick_side, last_brick = (std::int64_t{1} << m.B) - 1;
+  const std::size_t nb = m.bricks.size();
+  const auto brick_axis_of = [&](std::int64_t p) { return std::min<std::int64_t>(p / brick_side, last_brick); };
+
+  // --- Pass 1: windows -------------------------------------------------------------------------
+  Mailbox piece_voxels(m.scratch, "piece_voxels"), piece_cells(m.scratch, "piece_cells"), offers(m.scratch, "offers");
+  struct Counters {
+    std::size_t tetrahedra = 0, kept = 0, windows = 0, points = 0, regrown = 0, rejected = 0;
+  };
+  tbb::enumerable_thread_specific<Counters> counters;
+  std::atomic<std::size_t> done{0};
+  report(progress, "tetrahedralize", 0, double(nb));
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nb, 1), [&](const tbb::blocked_range<std::size_t>& range) {
+    Counters& count = counters.local();
+    for (std::size_t bi = range.begin(); bi != range.end(); ++bi) {
+      const BrickInfo& X = m.bricks[bi];
+      const std::int64_t Xc[3] = {X.x, X.y, X.z};
+      std::int64_t reach = (1 + n) * (std::int64_t{1} << (m.G - X.lmin));
+      for (;;) {
+        std::int64_t lo[3], hi[3], blo[3], bhi[3], glo[3], ghi[3];
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = std::max<std::int64_t>(0, Xc[a] * brick_side - reach);
+          hi[a] = std::min<std::int64_t>(side, (Xc[a] + 1) * brick_side + reach);
+          // The window's bricks and one more layer, whose other voxels certify exactly.
+          blo[a] = std::max<std::int64_t>(0, brick_axis_of(lo[a]) - 1);
+          bhi[a] = std::min(brick_axis_of(hi[a]) + 1, last_brick);
+          glo[a] = blo[a] == 0 ? std::int64_t{-1} << 40 : blo[a] * brick_side;
+          ghi[a] = bhi[a] == last_brick ? std::int64_t{1} << 40 : (bhi[a] + 1) * brick_side - 1;
+        }
+        struct Member {
+          const SurfaceVoxel* voxel;
+          LatticePoint point;
+        };
+        std::vector<Member> members;
+        Outsiders outsiders;
+        std::vector<std::shared_ptr<const BrickVoxels>> held;
+        for (std::int64_t z = blo[2]; z <= bhi[2]; ++z)
+          for (std::int64_t y = blo[1]; y <= bhi[1]; ++y)
+            for (std::int64_t x = blo[0]; x <= bhi[0]; ++x) {
+              const std::uint64_t code = morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z));
+              if (m.ordinal(code) < 0) continue;
+              held.push_back(m.load(code));
+              const BrickVoxels& b = *held.back();
+              for (std::size_t i = 0; i < b.voxels.size(); ++i) {
+                const LatticePoint& p = b.points[i];
+                if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
+                  members.push_back({&b.voxels[i], p});
+                else
+                  outsiders.points.push_back(
+                      {Occupancy::pack(p[0] / m.occ.side, p[1] / m.occ.side, p[2] / m.occ.side), p});
+              }
+            }
+        std::sort(outsiders.points.begin(), outsiders.points.end());
+        // Local index order = key order, as in the global extraction.
+        std::sort(members.begin(), members.end(), [](const Member& a, const Member& b) { return a.voxel->key < b.voxel->key; });
+        Voxels v;
+        v.key.resize(members.size());
+        v.distance.resize(members.size());
+        std::vector<LatticePoint> points(members.size());
+        for (std::size_t i = 0; i < members.size(); ++i) {
+          v.key[i] = members[i].voxel->key;
+          v.distance[i] = members[i].voxel->distance;
+          points[i] = members[i].point;
+        }
+        const bool whole = lo[0] == 0 && lo[1] == 0 && lo[2] == 0 && hi[0] == side && hi[1] == side && hi[2] == side;
+        Counters mine;
+        std::vector<Tet> cells;
+        bool certified = true;
+        {
+          const DelaunayTetrahedralization dt(points, false, nullptr);
+          dt.for_each_cell([&](const Tet& t) {
+            if (!certified) return;
+            int owner = 0;
+            for (int k = 1; k < 4; ++k) {
+              const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
+              if (lk < lo_ || (lk == lo_ && t[k] < t[owner])) owner = k;
+            }
+            const LatticePoint& op = points[t[owner]];
+            if (morton(std::uint32_t(brick_axis_of(op[0])), std::uint32_t(brick_axis_of(op[1])),
+                       std::uint32_t(brick_axis_of(op[2]))) != X.code)
+              return;
+            ++mine.tetrahedra;
+            if (!keep_cell(t, v, n)) return;
+            ++mine.kept;
+            if (cell_kind(cell_distances(t, v.distance)) == CellKind::kNever) return;
+            if (!whole) {
+              const LatticePoint* corners[4] = {&points[t[0]], &points[t[1]], &points[t[2]], &points[t[3]]};
+              Ball ball;
+              const Certificate c = circumball(corners, &ball)
+                                        ? certify(ball, corners, lo, hi, glo, ghi, outsiders, m.occ)
+                                        : Certificate::kUnknown;
+              if (c == Certificate::kNotGlobal) {
+                ++mine.rejected;
+                return;
+              }
+              if (c == Certificate::kUnknown) {
+                certified = false;
+                return;
+              }
+            }
+            cells.push_back(t);
+          });
+        }
+        ++count.windows;
+        count.points += points.size();
+        if (!certified) {
+          ++count.regrown;
+          reach *= 2;
+          continue;
+        }
+        count.tetrahedra += mine.tetrahedra;
+        count.kept += mine.kept;
+        count.rejected += mine.rejected;
+        if (cells.empty()) break;
+        // The piece: the cells' voxels in key order, the cells re-indexed (orientation kept).
+        std::vector<std::uint32_t> used;
+        for (const Tet& t : cells) used.insert(used.end(), t.begin(), t.end());
+        std::sort(used.begin(), used.end());
+        used.erase(std::unique(used.begin(), used.end()), used.end());
+        std::vector<SurfaceVoxel> piece(used.size());
+        for (std::size_t i = 0; i < used.size(); ++i) piece[i] = *members[used[i]].voxel;
+        const auto local = [&](std::uint32_t i) {
+          return std::uint32_t(std::lower_bound(used.begin(), used.end(), i) - used.begin());
+        };
+        std::vector<SnapOffer> offered;
+        for (Tet& t : cells) {
+          const std::array<float, 4> d = cell_distances(t, v.distance);
+          if (snap_fraction > 0 && cell_kind(d) == CellKind::kMixed) {
+            for (int i = 0; i < 4; ++i)
+              for (int j = i + 1; j < 4; ++j) {
+                const std::uint32_t a = std::min(t[i], t[j]), b = std::max(t[i], t[j]);
+                const float da = v.distance[a], db = v.distance[b];
+                if (!((da < 0 && db > 0) || (da > 0 && db < 0))) continue;
+                const double f = crossing_fraction(da, db);
+                const auto offer = [&](std::uint32_t target, std::uint32_t other, double fraction) {
+                  const SurfaceVoxel& sa = *members[a].voxel;
+                  const SurfaceVoxel& sb = *members[b].voxel;
+                  const auto mix = [f](float x, float y) { return float(double(x) + f * (double(y) - double(x))); };
+                  SnapOffer o{};
+                  o.target = v.key[target].bits;
+                  o.other = v.key[other].bits;
+                  o.fraction_bits = float_bits(float(fraction));
+                  const Eigen::Vector3d p = lerp(m.root.position(sa.key), m.root.position(sb.key), f);
+                  for (int c = 0; c < 3; ++c) {
+                    o.position[c] = p[c];
+                    o.colour[c] = mix(sa.colour[c], sb.colour[c]);
+                  }
+                  o.weight = mix(sa.weight, sb.weight);
+                  o.scale = mix(float(m.root.cell_size(sa.key.level())), float(m.root.cell_size(sb.key.level())));
+                  offered.push_back(o);
+                };
+                if (f < snap_fraction) offer(a, b, f);
+                if (1.0 - f < snap_fraction) offer(b, a, 1.0 - f);
+              }
+          }
+          for (auto& i : t) i = local(i);
+        }
+        piece_voxels.post(X.code, X.code, piece);
+        piece_cells.post(X.code, X.code, cells);
+        // The closest offer per voxel (ties: the lower other key), grouped by the voxel's brick.
+        std::sort(offered.begin(), offered.end(), [](const SnapOffer& p, const SnapOffer& q) {
+          return p.target != q.target ? p.target < q.target
+                 : p.fraction_bits != q.fraction_bits ? p.fraction_bits < q.fraction_bits
+                                                      : p.other < q.other;
+        });
+        offered.erase(std::unique(offered.begin(), offered.end(),
+                                  [](const SnapOffer& p, const SnapOffer& q) { return p.target == q.target; }),
+                      offered.end());
+        std::stable_sort(offered.begin(), offered.end(), [&](const SnapOffer& p, const SnapOffer& q) {
+          return m.brick_code_of_key(VoxelKey{p.target}) < m.brick_code_of_key(VoxelKey{q.target});
+        });
+        for (std::size_t i = 0; i < offered.size();) {
+          const std::uint64_t dest = m.brick_code_of_key(VoxelKey{offered[i].target});
+          std::size_t j = i;
+          while (j < offered.size() && m.brick_code_of_key(VoxelKey{offered[j].target}) == dest) ++j;
+          offers.post(dest, X.code, std::vector<SnapOffer>(offered.begin() + std::ptrdiff_t(i), offered.begin() + std::ptrdiff_t(j)));
+          i = j;
+        }
+        break;
+      }
+      report(progress, "tetrahedralize", double(++done), double(nb));
+    }
+  });
+  for (const Counters& c : counters) {
+    st.tetrahedra += c.tetrahedra;
+    st.kept_tetrahedra += c.kept;
+    st.windows += c.windows;
+    st.window_points += c.points;
+    st.windows_regrown += c.regrown;
+    st.window_cells_rejected += c.rejected;
+  }
+  {
+    std::lock_guard lock(m.cache_mutex);
+    m.lru.clear();
+    m.cached.clear();
+    m.cached_bytes = 0;
+  }
+  m.survivors.reset();
+
+  // --- Pass 2: snaps ---------------------------------------------------------------------------
+  constexpr double kStages = 5;  // "extract" steps: snap, march, number, faces, write
+  report(progress, "extract", 0, kStages);
+  Mailbox snaps(m.scratch, "snaps");
+  std::atomic<std::size_t> snapped{0};
+  {
+    const std::vector<std::uint64_t> dests = offers.destinations();
+    tbb::parallel_for(std::size_t(0), dests.size(), [&](std::size_t k) {
+      std::vector<SnapOffer> o = offers.collect<SnapOffer>(dests[k]);
+      std::sort(o.begin(), o.end(), [](const SnapOffer& p, const SnapOffer& q) {
+        return p.target != q.target ? p.target < q.target
+               : p.fraction_bits != q.fraction_bits ? p.fraction_bits < q.fraction_bits
+                                                    : p.other < q.other;
+      });
+      std::vector<Snap> decided;
+      for (std::size_t i = 0; i < o.size(); ++i) {
+        if (i > 0 && o[i].target == o[i - 1].target) continue;
+        Snap s{};
+        s.key = o[i].target;
+        for (int c = 0; c < 3; ++c) {
+          s.position[c] = o[i].position[c];
+          s.colour[c] = o[i].colour[c];
+        }
+        s.weight = o[i].weight;
+        s.scale = o[i].scale;
+        decided.push_back(s);
+      }
+      snapped += decided.size();
+      snaps.post(dests[k], dests[k], decided);
+    });
+  }
+  st.snapped_voxels = snapped.load();
+
+  // --- Pass 3: march ---------------------------------------------------------------------------
+  report(progress, "extract", 1, kStages);
+  Mailbox requests(m.scratch, "requests"), piece_faces(m.scratch, "piece_faces");
+  {
+    const std::vector<std::uint64_t> pieces = piece_cells.destinations();
+    tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t k) {
+      const std::uint64_t X = pieces[k];
+      const std::vector<SurfaceVoxel> pv = piece_voxels.collect<SurfaceVoxel>(X);
+      const std::vector<Tet> cells = piece_cells.collect<Tet>(X);
+      Voxels v;
+      const std::size_t count = pv.size();
+      v.key.resize(count);
+      v.position.resize(count);
+      v.distance.resize(count);
+      v.weight.resize(count);
+      v.scale.resize(count);
+      v.colour.resize(count);
+      std::vector<std::uint64_t> homes(count);
+      for (std::size_t i = 0; i < count; ++i) {
+        v.key[i] = pv[i].key;
+        v.position[i] = m.root.position(pv[i].key);
+        v.distance[i] = pv[i].distance;
+        v.weight[i] = pv[i].weight;
+        v.scale[i] = float(m.root.cell_size(pv[i].key.level()));
+        v.colour[i] = pv[i].colour;
+        homes[i] = m.brick_code_of_key(pv[i].key);
+      }
+      // 7.2: every snap is decided; apply those of this piece's voxels.
+      std::vector<std::uint64_t> bricks_used = homes;
+      std::sort(bricks_used.begin(), bricks_used.end());
+      bricks_used.erase(std::unique(bricks_used.begin(), bricks_used.end()), bricks_used.end());
+      for (std::uint64_t b : bricks_used) {
+        const std::vector<Snap> table = snaps.collect<Snap>(b);
+        if (table.empty()) continue;
+        for (std::size_t i = 0; i < count; ++i) {
+          if (homes[i] != b) continue;
+          const auto it = std::lower_bound(table.begin(), table.end(), v.key[i].bits,
+                                           [](const Snap& s, std::uint64_t key) { return s.key < key; });
+          if (it == table.end() || it->key != v.key[i].bits) continue;
+          v.position[i] = Eigen::Vector3d(it->position[0], it->position[1], it->position[2]);
+          v.colour[i] = {it->colour[0], it->colour[1], it->colour[2]};
+          v.weight[i] = it->weight;
+          v.scale[i] = it->scale;
+          v.distance[i] = 0;
+        }
+      }
+      const FieldView field = v.view();
+      std::vector<std::array<std::uint64_t, 3>> triangles;  // local MtVertex identities
+      std::vector<std::uint8_t> zero;
+      MtTriangle tri[2];
+      for (const Tet& t : cells) {
+        if (!emits_triangles(cell_distances(t, v.distance))) continue;
+        const int made = march_tetrahedron(t, field, tri);
+        for (int i = 0; i < made; ++i) {
+          triangles.push_back({tri[i].v[0].id(), tri[i].v[1].id(), tri[i].v[2].id()});
+          zero.push_back(tri[i].zero_face ? 1 : 0);
+        }
+      }
+      if (triangles.empty()) return;
+      // This piece's vertices in output order: by home code of the lower voxel, then identity
+      // (local indices are in key order).
+      std::vector<std::uint64_t> ids;
+      ids.reserve(3 * triangles.size());
+      for (const auto& t : triangles) ids.insert(ids.end(), t.begin(), t.end());
+      std::sort(ids.begin(), ids.end());
+      ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+      std::vector<std::uint64_t> home_code_of(count);
+      for (std::size_t i = 0; i < count; ++i) home_code_of[i] = home_code(v.key[i]);
+      std::vector<std::uint64_t> sorted_ids = ids;
+      std::stable_sort(sorted_ids.begin(), sorted_ids.end(), [&](std::uint64_t p, std::uint64_t q) {
+        return home_code_of[p >> 32] < home_code_of[q >> 32];
+      });
+      std::vector<std::uint32_t> local_of(ids.size());  // position in ids -> local vertex number
+      for (std::size_t j = 0; j < sorted_ids.size(); ++j)
+        local_of[std::size_t(std::lower_bound(ids.begin(), ids.end(), sorted_ids[j]) - ids.begin())] = std::uint32_t(j);
+      std::vector<VertexRequest> asked(sorted_ids.size());
+      for (std::size_t j = 0; j < sorted_ids.size(); ++j) {
+        const MtVertex id = MtVertex::from_id(sorted_ids[j]);
+        const Attributes at = id.a == id.b ? voxel_attributes(v, id.a) : crossing_attributes(v, id.a, id.b);
+        VertexRequest& r = asked[j];
+        r = VertexRequest{};
+        r.a = v.key[id.a].bits;
+        r.b = v.key[id.b].bits;
+        r.src = X;
+        r.local = std::uint32_t(j);
+        const Eigen::Vector3f p = at.position.cast<float>();
+        for (int c = 0; c < 3; ++c) {
+          r.position[c] = p[c];
+          r.colour[c] = to_byte(at.colour[c]);
+        }
+        r.confidence = at.weight;
+        r.scale = at.scale;
+      }
+      for (std::size_t i = 0; i < asked.size();) {
+        const std::uint64_t dest = homes[MtVertex::from_id(sorted_ids[i]).a];
+        std::size_t j = i;
+        while (j < asked.size() && homes[MtVertex::from_id(sorted_ids[j]).a] == dest) ++j;
+        requests.post(dest, X, std::vector<VertexRequest>(asked.begin() + std::ptrdiff_t(i), asked.begin() + std::ptrdiff_t(j)));
+        i = j;
+      }
+      std::vector<Face> faces(triangles.size());
+      for (std::size_t f = 0; f < triangles.size(); ++f) {
+        for (int c = 0; c < 3; ++c)
+          faces[f].v[c] = local_of[std::size_t(std::lower_bound(ids.begin(), ids.end(), triangles[f][c]) - ids.begin())];
+        faces[f].zero = zero[f];
+      }
+      piece_faces.post(X, X, faces);
+    });
+  }
+
+  // --- Pass 4: number each home brick's vertices -------------------------------------------------
+  report(progress, "extract", 2, kStages);
+  Mailbox vertices(m.scratch, "vertices"), ranks(m.scratch, "ranks");
+  std::vector<std::uint64_t> home_count(nb, 0);
+  {
+    const std::vector<std::uint64_t> homes = requests.destinations();
+    tbb::parallel_for(std::size_t(0), homes.size(), [&](std::size_t k) {
+      const std::uint64_t H = homes[k];
+      const std::ptrdiff_t h = m.ordinal(H);
+      if (h < 0) throw std::logic_error("extract: a vertex's home brick holds no voxel");
+      std::vector<VertexRequest> r = requests.collect<VertexRequest>(H);
+      std::vector<std::uint64_t> code_of_a(r.size());
+      for (std::size_t i = 0; i < r.size(); ++i) code_of_a[i] = home_code(VoxelKey{r[i].a});
+      std::vector<std::uint32_t> order(r.size());
+      std::iota(order.begin(), order.end(), 0u);
+      std::sort(order.begin(), order.end(), [&](std::uint32_t p, std::uint32_t q) {
+        const VertexRequest &x = r[p], &y = r[q];
+        if (code_of_a[p] != code_of_a[q]) return code_of_a[p] < code_of_a[q];
+        if (x.a != y.a) return x.a < y.a;
+        if (x.b != y.b) return x.b < y.b;
+        return x.src != y.src ? x.src < y.src : x.local < y.local;
+      });
+      std::vector<PlyVertex> numbered;
+      std::vector<std::pair<std::uint64_t, Rank>> answers(r.size());  // (requester, answer)
+      for (std::size_t i = 0; i < order.size(); ++i) {
+        const VertexRequest& x = r[order[i]];
+        if (i == 0 || x.a != r[order[i - 1]].a || x.b != r[order[i - 1]].b) {
+          PlyVertex pv{};
+          std::memcpy(pv.position, x.position, sizeof(pv.position));
+          std::memcpy(pv.colour, x.colour, sizeof(pv.colour));
+          pv.confidence = x.confidence;
+          pv.scale = x.scale;
+          numbered.push_back(pv);
+        }
+        answers[i] = {x.src, Rank{x.local, std::uint32_t(h), std::uint32_t(numbered.size() - 1)}};
+      }
+      home_count[std::size_t(h)] = numbered.size();
+      vertices.post(H, H, numbered);
+      std::stable_sort(answers.begin(), answers.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
+      std::vector<Rank> batch;
+      for (std::size_t i = 0; i < answers.size();) {
+        std::size_t j = i;
+        batch.clear();
+        for (; j < answers.size() && answers[j].first == answers[i].first; ++j) batch.push_back(answers[j].second);
+        ranks.post(answers[i].first, H, batch);
+        i = j;
+      }
+    });
+  }
+  std::vector<std::uint64_t> base(nb + 1, 0);
+  for (std::size_t i = 0; i < nb; ++i) base[i + 1] = base[i] + home_count[i];
+  const std::uint64_t total_vertices = base[nb];
+  if (total_vertices > std::uint64_t(std::numeric_limits<std::int32_t>::max()))
+    throw InputError("extract: " + std::to_string(total_vertices) + " vertices; PLY int indices allow 2^31 - 1");
+
+  // --- Pass 5: faces in global numbers, to the home of their smallest vertex -----------------------
+  report(progress, "extract", 3, kStages);
+  Mailbox homed_faces(m.scratch, "homed_faces");
+  {
+    const std::vector<std::uint64_t> pieces = piece_faces.destinations();
+    tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t k) {
+      const std::uint64_t X = pieces[k];
+      const std::vector<Rank> answers = ranks.collect<Rank>(X);
+      std::vector<std::uint32_t> global(answers.size()), home(answers.size());
+      for (const Rank& a : answers) {
+        if (a.local >= global.size()) throw std::logic_error("extract: a vertex rank out of range");
+        global[a.local] = std::uint32_t(base[a.home] + a.rank);
+        home[a.local] = a.home;
+      }
+      std::vector<Face> faces = piece_faces.collect<Face>(X);
+      std::vector<std::pair<std::uint32_t, Face>> routed(faces.size());  // (home ordinal, face)
+      for (std::size_t f = 0; f < faces.size(); ++f) {
+        Face g = faces[f];
+        int first = 0;
+        for (int c = 0; c < 3; ++c) {
+          g.v[c] = global[faces[f].v[c]];
+          if (g.v[c] < g.v[first]) first = c;
+        }
+        std::rotate(g.v, g.v + first, g.v + 3);  // smallest first, orientation kept
+        routed[f] = {home[faces[f].v[first]], g};
+      }
+      std::stable_sort(routed.begin(), routed.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
+      std::vector<Face> batch;
+      for (std::size_t i = 0; i < routed.size();) {
+        std::size_t j = i;
+        batch.clear();
+        for (; j < routed.size() && routed[j].first == routed[i].first; ++j) batch.push_back(routed[j].second);
+        homed_faces.post(m.bricks[routed[i].first].code, X, batch);
+        i = j;
+      }
+    });
+  }
+
+  // --- Pass 6: each home's faces sorted, interior zero faces cancelled ---------------------------
+  Mailbox final_faces(m.scratch, "final_faces");
+  std::atomic<std::size_t> interior{0};
+  {
+    const std::vector<std::uint64_t> homes = homed_faces.destinations();
+    tbb::parallel_for(std::size_t(0), homes.size(), [&](std::size_t k) {
+      std::vector<Face> faces = homed_faces.collect<Face>(homes[k]);
+      // Zero faces: both copies of an interior one have the same vertex set.
+      std::vector<std::pair<std::array<std::uint32_t, 3>, std::size_t>> by_set;
+      for (std::size_t i = 0; i < faces.size(); ++i) {
+        if (!faces[i].zero) continue;
+        std::array<std::uint32_t, 3> s{faces[i].v[0], faces[i].v[1], faces[i].v[2]};
+        std::sort(s.begin(), s.end());
+        by_set.push_back({s, i});
+      }
+      std::sort(by_set.begin(), by_set.end());
+      std::vector<std::uint8_t> cancelled(faces.size(), 0);
+      for (std::size_t i = 0; i + 1 < by_set.size(); ++i)
+        if (by_set[i + 1].first == by_set[i].first) {
+          cancelled[by_set[i].second] = cancelled[by_set[i + 1].second] = 1;
+          ++interior;
+          ++i;
+        }
+      std::vector<std::array<std::uint32_t, 3>> kept;
+      kept.reserve(faces.size());
+      for (std::size_t i = 0; i < faces.size(); ++i)
+        if (!cancelled[i]) kept.push_back({faces[i].v[0], faces[i].v[1], faces[i].v[2]});
+      std::sort(kept.begin(), kept.end());
+      final_faces.post(homes[k], homes[k], kept);
+    });
+  }
+  st.interior_zero_faces = interior.load();
+
+  // --- Pass 7: components, then the stream ---------------------------------------------------------
+  report(progress, "extract", 4, kStages);
+  const std::size_t V = std::size_t(total_vertices);
+  // remap[v]: output number of vertex v, or kGone. Vertices only cancelled zero faces used, and
+  // those of small components, are dropped.
+  constexpr std::uint32_t kGone = ~std::uint32_t{0};
+  std::vector<std::uint32_t> remap(V, kGone);
+  const std::size_t min_triangles = m.options.min_component_triangles;
+  std::vector<std::uint32_t> parent;
+  const auto find = [&](std::uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  std::vector<bool> big;  // by root
+  if (min_triangles > 0) {
+    parent.resize(V);
+    std::iota(parent.begin(), parent.end(), 0u);
+    for (const BrickInfo& b : m.bricks)
+      for (const auto& f : final_faces.collect<std::array<std::uint32_t, 3>>(b.code)) {
+        for (int c = 1; c < 3; ++c) {
+          const std::uint32_t x = find(f[0]), y = find(f[c]);
+          if (x != y) parent[std::max(x, y)] = std::min(x, y);
+        }
+      }
+    std::vector<std::uint32_t>& size = remap;  // reused: triangles per root
+    std::fill(size.begin(), size.end(), 0);
+    for (const BrickInfo& b : m.bricks)
+      for (const auto& f : final_faces.collect<std::array<std::uint32_t, 3>>(b.code)) ++size[find(f[0])];
+    big.assign(V, false);
+    for (std::size_t i = 0; i < V; ++i) {
+      if (size[i] == 0) continue;
+      if (size[i] >= min_triangles) big[i] = true;
+      else {
+        ++st.removed_components;
+        st.removed_triangles += size[i];
+      }
+    }
+    std::fill(remap.begin(), remap.end(), kGone);
+  }
+  std::size_t faces_out = 0;
+  for (const BrickInfo& b : m.bricks)
+    for (const auto& f : final_faces.collect<std::array<std::uint32_t, 3>>(b.code)) {
+      if (min_triangles > 0 && !big[find(f[0])]) continue;
+      ++faces_out;
+      for (std::uint32_t x : f) remap[x] = 0;
+    }
+  std::vector<bool>().swap(big);
+  std::vector<std::uint32_t>().swap(parent);
+  std::uint32_t next = 0;
+  for (auto& r : remap)
+    if (r != kGone) r = next++;
+  out.begin(next, faces_out);
+  std::uint64_t at = 0;
+  for (const BrickInfo& b : m.bricks) {
+    for (const PlyVertex& pv : vertices.collect<PlyVertex>(b.code)) {
+      if (remap[at++] == kGone) continue;
+      out.vertex(Eigen::Vector3f(pv.position[0], pv.position[1], pv.position[2]),
+                 Rgb8{pv.colour[0], pv.colour[1], pv.colour[2]}, pv.confidence, pv.scale);
+    }
+  }
+  // A face is kept iff its vertices are: components go whole.
+  for (const BrickInfo& b : m.bricks)
+    for (const auto& f : final_faces.collect<std::array<std::uint32_t, 3>>(b.code)) {
+      if (remap[f[0]] == kGone) continue;
+      out.face({remap[f[0]], remap[f[1]], remap[f[2]]});
+    }
+  out.end();
+  st.triangles = faces_out;
+  report(progress, "extract", kStages, kStages);
+  if (stats) *stats = st;
+}
+
+}  // namespace sf
