@@ -154,8 +154,10 @@ void print_summary(const FusionStats& s, const MeshCounts& mesh, const std::stri
 }
 
 // Parameters that shape the integrated field: a job refuses to resume when they change.
-// (Regularization and extraction may change: they rerun from the job's tiles.)
-const std::vector<std::string> kIntegrationParameters = {"input.", "triangulate.", "integrate.", "octree."};
+// (Regularization and extraction may change: they rerun from the job's tiles. octree.brick_size
+// only picks a new job's brick level, which the job records.)
+const std::vector<std::string> kIntegrationParameters = {"input.",        "triangulate.",   "integrate.",
+                                                         "octree.bbox",   "octree.padding", "octree.brick_level"};
 
 std::size_t default_memory_limit() {
   const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);

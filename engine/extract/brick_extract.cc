@@ -84,7 +84,11 @@ std::string describe(VoxelKey k) {
 struct BrickVoxels {
   std::vector<SurfaceVoxel> voxels;
   std::vector<LatticePoint> points;
-  std::size_t bytes() const { return voxels.capacity() * sizeof(SurfaceVoxel) + points.capacity() * sizeof(LatticePoint); }
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell;  // (occupancy cell, voxel), sorted
+  std::size_t bytes() const {
+    return voxels.capacity() * sizeof(SurfaceVoxel) + points.capacity() * sizeof(LatticePoint) +
+           by_cell.capacity() * sizeof(by_cell[0]);
+  }
 };
 
 struct BrickInfo {
@@ -204,7 +208,12 @@ std::shared_ptr<const BrickVoxels> BrickExtraction::Impl::load(std::uint64_t cod
   auto b = std::make_shared<BrickVoxels>();
   b->voxels = survivors->collect<SurfaceVoxel>(code);
   b->points.resize(b->voxels.size());
-  for (std::size_t i = 0; i < b->voxels.size(); ++i) b->points[i] = lattice(b->voxels[i].key);
+  b->by_cell.resize(b->voxels.size());
+  for (std::size_t i = 0; i < b->voxels.size(); ++i) {
+    const LatticePoint p = b->points[i] = lattice(b->voxels[i].key);
+    b->by_cell[i] = {Occupancy::pack(p[0] / occ.side, p[1] / occ.side, p[2] / occ.side), std::uint32_t(i)};
+  }
+  std::sort(b->by_cell.begin(), b->by_cell.end());
   std::lock_guard lock(cache_mutex);
   if (cached.count(code)) return cached[code]->second;
   lru.emplace_front(code, b);
@@ -317,118 +326,177 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
     Counters& count = counters.local();
     for (std::size_t bi = range.begin(); bi != range.end(); ++bi) {
       const BrickInfo& X = m.bricks[bi];
-      const std::int64_t Xc[3] = {X.x, X.y, X.z};
-      std::int64_t reach = (1 + n) * (std::int64_t{1} << (m.G - X.lmin));
-      for (;;) {
-        std::int64_t lo[3], hi[3], blo[3], bhi[3], glo[3], ghi[3];
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = std::max<std::int64_t>(0, Xc[a] * brick_side - reach);
-          hi[a] = std::min<std::int64_t>(side, (Xc[a] + 1) * brick_side + reach);
-          // The window's bricks and one more layer, whose other voxels certify exactly.
-          blo[a] = std::max<std::int64_t>(0, brick_axis_of(lo[a]) - 1);
-          bhi[a] = std::min(brick_axis_of(hi[a]) + 1, last_brick);
-          glo[a] = blo[a] == 0 ? std::int64_t{-1} << 40 : blo[a] * brick_side;
-          ghi[a] = bhi[a] == last_brick ? std::int64_t{1} << 40 : (bhi[a] + 1) * brick_side - 1;
+      // Bricks held while X's windows are built (the cache may drop them meanwhile).
+      std::unordered_map<std::uint64_t, std::shared_ptr<const BrickVoxels>> held;
+      const auto hold = [&](std::uint64_t code) -> const BrickVoxels* {
+        auto it = held.find(code);
+        if (it == held.end()) {
+          if (m.ordinal(code) < 0) return nullptr;
+          it = held.emplace(code, m.load(code)).first;
         }
-        struct Member {
-          const SurfaceVoxel* voxel;
-          LatticePoint point;
-        };
-        std::vector<Member> members;
-        Outsiders outsiders;
-        std::vector<std::shared_ptr<const BrickVoxels>> held;
-        for (std::int64_t z = blo[2]; z <= bhi[2]; ++z)
-          for (std::int64_t y = blo[1]; y <= bhi[1]; ++y)
-            for (std::int64_t x = blo[0]; x <= bhi[0]; ++x) {
-              const std::uint64_t code = morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z));
-              if (m.ordinal(code) < 0) continue;
-              held.push_back(m.load(code));
-              const BrickVoxels& b = *held.back();
-              for (std::size_t i = 0; i < b.voxels.size(); ++i) {
-                const LatticePoint& p = b.points[i];
-                if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
-                  members.push_back({&b.voxels[i], p});
-                else
-                  outsiders.points.push_back(
-                      {Occupancy::pack(p[0] / m.occ.side, p[1] / m.occ.side, p[2] / m.occ.side), p});
+        return it->second.get();
+      };
+      // Windows by owner level: the cells owned by X's voxels of level L have every vertex
+      // within reach(L) = (1 + n) h(L) of the owner, so the box of X's level-L voxels grown by
+      // reach(L) holds them. Coarse levels reach far but are usually few and local; the window of
+      // a level is shared by every finer level whose box it contains.
+      struct Group {
+        std::int64_t box[2][3];  // X's voxels of these levels (lattice, closed)
+        std::int64_t reach;
+        std::uint32_t levels = 0;  // bit L: owners of level L
+      };
+      std::vector<Group> groups;
+      {
+        const BrickVoxels& own = *hold(X.code);
+        std::int64_t lbox[kMaxLevel + 1][2][3];
+        std::uint32_t present = 0;
+        for (std::size_t i = 0; i < own.voxels.size(); ++i) {
+          const int L = own.voxels[i].key.level();
+          const LatticePoint& p = own.points[i];
+          if (!(present >> L & 1)) {
+            present |= 1u << L;
+            for (int a = 0; a < 3; ++a) lbox[L][0][a] = lbox[L][1][a] = p[a];
+          }
+          for (int a = 0; a < 3; ++a) {
+            lbox[L][0][a] = std::min<std::int64_t>(lbox[L][0][a], p[a]);
+            lbox[L][1][a] = std::max<std::int64_t>(lbox[L][1][a], p[a]);
+          }
+        }
+        for (int L = 0; L <= kMaxLevel; ++L) {  // coarse to fine
+          if (!(present >> L & 1)) continue;
+          const std::int64_t reach = (1 + n) * (std::int64_t{1} << (m.G - L));
+          bool joined = false;
+          for (Group& g : groups) {
+            bool inside = true;
+            for (int a = 0; a < 3; ++a)
+              inside = inside && lbox[L][0][a] - reach >= g.box[0][a] - g.reach && lbox[L][1][a] + reach <= g.box[1][a] + g.reach;
+            if (inside) {
+              g.levels |= 1u << L;
+              joined = true;
+              break;
+            }
+          }
+          if (joined) continue;
+          Group g;
+          std::memcpy(g.box, lbox[L], sizeof(g.box));
+          g.reach = reach;
+          g.levels = 1u << L;
+          groups.push_back(g);
+        }
+      }
+      // The cells X owns, over all its windows, by their voxels.
+      std::vector<std::array<const SurfaceVoxel*, 4>> owned;
+      std::vector<SnapOffer> offered;
+      for (Group& group : groups) {
+        for (;;) {
+          std::int64_t lo[3], hi[3];
+          for (int a = 0; a < 3; ++a) {
+            lo[a] = std::max<std::int64_t>(0, group.box[0][a] - group.reach);
+            hi[a] = std::min<std::int64_t>(side, group.box[1][a] + group.reach);
+          }
+          const auto in_window = [&](const LatticePoint& p) {
+            return p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2];
+          };
+          std::vector<const SurfaceVoxel*> members;
+          std::vector<LatticePoint> member_points;
+          {
+            std::vector<std::pair<std::uint64_t, std::pair<const SurfaceVoxel*, LatticePoint>>> found;
+            for (std::int64_t z = brick_axis_of(lo[2]); z <= brick_axis_of(hi[2]); ++z)
+              for (std::int64_t y = brick_axis_of(lo[1]); y <= brick_axis_of(hi[1]); ++y)
+                for (std::int64_t x = brick_axis_of(lo[0]); x <= brick_axis_of(hi[0]); ++x) {
+                  const BrickVoxels* b = hold(morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
+                  if (!b) continue;
+                  for (std::size_t i = 0; i < b->voxels.size(); ++i)
+                    if (in_window(b->points[i])) found.push_back({b->voxels[i].key.bits, {&b->voxels[i], b->points[i]}});
+                }
+            // Local index order = key order, as in the global extraction.
+            std::sort(found.begin(), found.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
+            members.resize(found.size());
+            member_points.resize(found.size());
+            for (std::size_t i = 0; i < found.size(); ++i) {
+              members[i] = found[i].second.first;
+              member_points[i] = found[i].second.second;
+            }
+          }
+          // The certificate's voxels outside the window, loaded per occupied cell when a sphere
+          // reaching out of the window meets it.
+          std::unordered_map<std::uint64_t, std::vector<LatticePoint>> outside_cells;
+          const OutsidePoints outside = [&](std::uint64_t cell) -> const std::vector<LatticePoint>& {
+            auto [it, fresh] = outside_cells.try_emplace(cell);
+            if (!fresh) return it->second;
+            const std::int64_t c[3] = {std::int64_t(cell & 0x1FFFFF), std::int64_t((cell >> 21) & 0x1FFFFF),
+                                       std::int64_t(cell >> 42)};
+            const BrickVoxels* b = hold(morton(std::uint32_t(brick_axis_of(c[0] * m.occ.side)),
+                                               std::uint32_t(brick_axis_of(c[1] * m.occ.side)),
+                                               std::uint32_t(brick_axis_of(c[2] * m.occ.side))));
+            if (!b) return it->second;
+            for (auto e = std::lower_bound(b->by_cell.begin(), b->by_cell.end(),
+                                           std::pair<std::uint64_t, std::uint32_t>{cell, 0});
+                 e != b->by_cell.end() && e->first == cell; ++e)
+              if (!in_window(b->points[e->second])) it->second.push_back(b->points[e->second]);
+            return it->second;
+          };
+          Voxels v;
+          v.key.resize(members.size());
+          v.distance.resize(members.size());
+          for (std::size_t i = 0; i < members.size(); ++i) {
+            v.key[i] = members[i]->key;
+            v.distance[i] = members[i]->distance;
+          }
+          const bool whole = lo[0] == 0 && lo[1] == 0 && lo[2] == 0 && hi[0] == side && hi[1] == side && hi[2] == side;
+          Counters mine;
+          std::vector<Tet> cells;
+          bool certified = true;
+          {
+            const DelaunayTetrahedralization dt(member_points, false, nullptr);
+            dt.for_each_cell([&](const Tet& t) {
+              if (!certified) return;
+              int owner = 0;
+              for (int k = 1; k < 4; ++k) {
+                const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
+                if (lk < lo_ || (lk == lo_ && t[k] < t[owner])) owner = k;
               }
-            }
-        std::sort(outsiders.points.begin(), outsiders.points.end());
-        // Local index order = key order, as in the global extraction.
-        std::sort(members.begin(), members.end(), [](const Member& a, const Member& b) { return a.voxel->key < b.voxel->key; });
-        Voxels v;
-        v.key.resize(members.size());
-        v.distance.resize(members.size());
-        std::vector<LatticePoint> points(members.size());
-        for (std::size_t i = 0; i < members.size(); ++i) {
-          v.key[i] = members[i].voxel->key;
-          v.distance[i] = members[i].voxel->distance;
-          points[i] = members[i].point;
-        }
-        const bool whole = lo[0] == 0 && lo[1] == 0 && lo[2] == 0 && hi[0] == side && hi[1] == side && hi[2] == side;
-        Counters mine;
-        std::vector<Tet> cells;
-        bool certified = true;
-        {
-          const DelaunayTetrahedralization dt(points, false, nullptr);
-          dt.for_each_cell([&](const Tet& t) {
-            if (!certified) return;
-            int owner = 0;
-            for (int k = 1; k < 4; ++k) {
-              const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
-              if (lk < lo_ || (lk == lo_ && t[k] < t[owner])) owner = k;
-            }
-            const LatticePoint& op = points[t[owner]];
-            if (morton(std::uint32_t(brick_axis_of(op[0])), std::uint32_t(brick_axis_of(op[1])),
-                       std::uint32_t(brick_axis_of(op[2]))) != X.code)
-              return;
-            ++mine.tetrahedra;
-            if (!keep_cell(t, v, n)) return;
-            ++mine.kept;
-            if (cell_kind(cell_distances(t, v.distance)) == CellKind::kNever) return;
-            if (!whole) {
-              const LatticePoint* corners[4] = {&points[t[0]], &points[t[1]], &points[t[2]], &points[t[3]]};
-              Ball ball;
-              const Certificate c = circumball(corners, &ball)
-                                        ? certify(ball, corners, lo, hi, glo, ghi, outsiders, m.occ)
-                                        : Certificate::kUnknown;
-              if (c == Certificate::kNotGlobal) {
-                ++mine.rejected;
+              if (!(group.levels >> v.key[t[owner]].level() & 1)) return;
+              const LatticePoint& op = member_points[t[owner]];
+              if (morton(std::uint32_t(brick_axis_of(op[0])), std::uint32_t(brick_axis_of(op[1])),
+                         std::uint32_t(brick_axis_of(op[2]))) != X.code)
                 return;
+              ++mine.tetrahedra;
+              if (!keep_cell(t, v, n)) return;
+              ++mine.kept;
+              if (cell_kind(cell_distances(t, v.distance)) == CellKind::kNever) return;
+              if (!whole) {
+                const LatticePoint* corners[4] = {&member_points[t[0]], &member_points[t[1]], &member_points[t[2]],
+                                                  &member_points[t[3]]};
+                Ball ball;
+                const Certificate c = circumball(corners, &ball) ? certify(ball, corners, lo, hi, outside, m.occ)
+                                                                 : Certificate::kUnknown;
+                if (c == Certificate::kNotGlobal) {
+                  ++mine.rejected;
+                  return;
+                }
+                if (c == Certificate::kUnknown) {
+                  certified = false;
+                  return;
+                }
               }
-              if (c == Certificate::kUnknown) {
-                certified = false;
-                return;
-              }
-            }
-            cells.push_back(t);
-          });
-        }
-        ++count.windows;
-        count.points += points.size();
-        if (!certified) {
-          ++count.regrown;
-          reach *= 2;
-          continue;
-        }
-        count.tetrahedra += mine.tetrahedra;
-        count.kept += mine.kept;
-        count.rejected += mine.rejected;
-        if (cells.empty()) break;
-        // The piece: the cells' voxels in key order, the cells re-indexed (orientation kept).
-        std::vector<std::uint32_t> used;
-        for (const Tet& t : cells) used.insert(used.end(), t.begin(), t.end());
-        std::sort(used.begin(), used.end());
-        used.erase(std::unique(used.begin(), used.end()), used.end());
-        std::vector<SurfaceVoxel> piece(used.size());
-        for (std::size_t i = 0; i < used.size(); ++i) piece[i] = *members[used[i]].voxel;
-        const auto local = [&](std::uint32_t i) {
-          return std::uint32_t(std::lower_bound(used.begin(), used.end(), i) - used.begin());
-        };
-        std::vector<SnapOffer> offered;
-        for (Tet& t : cells) {
-          const std::array<float, 4> d = cell_distances(t, v.distance);
-          if (snap_fraction > 0 && cell_kind(d) == CellKind::kMixed) {
+              cells.push_back(t);
+            });
+          }
+          ++count.windows;
+          count.points += member_points.size();
+          if (!certified) {
+            ++count.regrown;
+            group.reach *= 2;
+            continue;
+          }
+          count.tetrahedra += mine.tetrahedra;
+          count.kept += mine.kept;
+          count.rejected += mine.rejected;
+          for (const Tet& t : cells) {
+            owned.push_back({members[t[0]], members[t[1]], members[t[2]], members[t[3]]});
+            const std::array<float, 4> d = cell_distances(t, v.distance);
+            if (!(snap_fraction > 0 && cell_kind(d) == CellKind::kMixed)) continue;
             for (int i = 0; i < 4; ++i)
               for (int j = i + 1; j < 4; ++j) {
                 const std::uint32_t a = std::min(t[i], t[j]), b = std::max(t[i], t[j]);
@@ -436,8 +504,8 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
                 if (!((da < 0 && db > 0) || (da > 0 && db < 0))) continue;
                 const double f = crossing_fraction(da, db);
                 const auto offer = [&](std::uint32_t target, std::uint32_t other, double fraction) {
-                  const SurfaceVoxel& sa = *members[a].voxel;
-                  const SurfaceVoxel& sb = *members[b].voxel;
+                  const SurfaceVoxel& sa = *members[a];
+                  const SurfaceVoxel& sb = *members[b];
                   const auto mix = [f](float x, float y) { return float(double(x) + f * (double(y) - double(x))); };
                   SnapOffer o{};
                   o.target = v.key[target].bits;
@@ -456,12 +524,29 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
                 if (1.0 - f < snap_fraction) offer(b, a, 1.0 - f);
               }
           }
-          for (auto& i : t) i = local(i);
+          break;
         }
+      }
+      if (!owned.empty()) {
+        // The piece: the cells' voxels in key order, the cells re-indexed (orientation kept).
+        std::vector<const SurfaceVoxel*> used;
+        for (const auto& c : owned) used.insert(used.end(), c.begin(), c.end());
+        const auto by_key = [](const SurfaceVoxel* p, const SurfaceVoxel* q) { return p->key < q->key; };
+        std::sort(used.begin(), used.end(), by_key);
+        used.erase(std::unique(used.begin(), used.end(), [](const SurfaceVoxel* p, const SurfaceVoxel* q) { return p->key == q->key; }),
+                   used.end());
+        std::vector<SurfaceVoxel> piece(used.size());
+        for (std::size_t i = 0; i < used.size(); ++i) piece[i] = *used[i];
+        std::vector<Tet> cells(owned.size());
+        for (std::size_t c = 0; c < owned.size(); ++c)
+          for (int k = 0; k < 4; ++k)
+            cells[c][k] = std::uint32_t(std::lower_bound(used.begin(), used.end(), owned[c][k], by_key) - used.begin());
         piece_voxels.post(X.code, X.code, piece);
         piece_cells.post(X.code, X.code, cells);
         // The closest offer per voxel (ties: the lower other key), grouped by the voxel's brick.
-        std::sort(offered.begin(), offered.end(), [](const SnapOffer& p, const SnapOffer& q) {
+        std::sort(offered.begin(), offered.end(), [&](const SnapOffer& p, const SnapOffer& q) {
+          const std::uint64_t bp = m.brick_code_of_key(VoxelKey{p.target}), bq = m.brick_code_of_key(VoxelKey{q.target});
+          if (bp != bq) return bp < bq;
           return p.target != q.target ? p.target < q.target
                  : p.fraction_bits != q.fraction_bits ? p.fraction_bits < q.fraction_bits
                                                       : p.other < q.other;
@@ -469,17 +554,14 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         offered.erase(std::unique(offered.begin(), offered.end(),
                                   [](const SnapOffer& p, const SnapOffer& q) { return p.target == q.target; }),
                       offered.end());
-        std::stable_sort(offered.begin(), offered.end(), [&](const SnapOffer& p, const SnapOffer& q) {
-          return m.brick_code_of_key(VoxelKey{p.target}) < m.brick_code_of_key(VoxelKey{q.target});
-        });
         for (std::size_t i = 0; i < offered.size();) {
           const std::uint64_t dest = m.brick_code_of_key(VoxelKey{offered[i].target});
           std::size_t j = i;
           while (j < offered.size() && m.brick_code_of_key(VoxelKey{offered[j].target}) == dest) ++j;
-          offers.post(dest, X.code, std::vector<SnapOffer>(offered.begin() + std::ptrdiff_t(i), offered.begin() + std::ptrdiff_t(j)));
+          offers.post(dest, X.code,
+                      std::vector<SnapOffer>(offered.begin() + std::ptrdiff_t(i), offered.begin() + std::ptrdiff_t(j)));
           i = j;
         }
-        break;
       }
       report(progress, "tetrahedralize", double(++done), double(nb));
     }

@@ -41,8 +41,7 @@ constexpr long double kBallMargin = 1e-3L;  // lattice units, far above the long
 }  // namespace
 
 Certificate certify(const Ball& ball, const LatticePoint* cell_points[4], const std::int64_t lo[3],
-                    const std::int64_t hi[3], const std::int64_t glo[3], const std::int64_t ghi[3], const Outsiders& out,
-                    const Occupancy& occ) {
+                    const std::int64_t hi[3], const OutsidePoints& outside, const Occupancy& occ) {
   bool inside = true;
   for (int k = 0; k < 3; ++k)
     inside = inside && ball.centre[k] - ball.radius > static_cast<long double>(lo[k] - 1) + kBallMargin &&
@@ -58,7 +57,6 @@ Certificate certify(const Ball& ball, const LatticePoint* cell_points[4], const 
   }
   if ((c1[2] - c0[2] + 1) * (c1[1] - c0[1] + 1) > 65536) return Certificate::kUnknown;
   const long double r2 = (ball.radius + kBallMargin) * (ball.radius + kBallMargin);
-  bool unknown = false;
   // The occupied cells of the ball's box, row by row (a big ball over empty space costs its rows).
   for (std::int64_t z = c0[2]; z <= c1[2]; ++z)
     for (std::int64_t y = c0[1]; y <= c1[1]; ++y) {
@@ -66,28 +64,20 @@ Certificate certify(const Ball& ball, const LatticePoint* cell_points[4], const 
       for (auto cell_it = std::lower_bound(occ.cells.begin(), occ.cells.end(), Occupancy::pack(c0[0], y, z));
            cell_it != occ.cells.end() && *cell_it <= row_end; ++cell_it) {
         const std::int64_t cell[3] = {std::int64_t(*cell_it & 0x1FFFFF), y, z};
-        bool in_window = true, in_gathered = true;
+        bool in_window = true;
         long double d2 = 0;  // squared distance from the centre to the cell's closed box
         for (int k = 0; k < 3; ++k) {
           const std::int64_t first = cell[k] * occ.side, last = first + occ.side - 1;
           in_window = in_window && first >= lo[k] && last <= hi[k];
-          in_gathered = in_gathered && first >= glo[k] && last <= ghi[k];
           const long double q = std::clamp(ball.centre[k], static_cast<long double>(first), static_cast<long double>(last));
           d2 += (ball.centre[k] - q) * (ball.centre[k] - q);
         }
         if (in_window || d2 > r2) continue;
-        if (!in_gathered) {
-          unknown = true;
-          continue;
-        }
-        auto it = std::lower_bound(out.points.begin(), out.points.end(), *cell_it,
-                                   [](const auto& e, std::uint64_t k) { return e.first < k; });
-        for (; it != out.points.end() && it->first == *cell_it; ++it)
-          if (lattice_side_of_sphere(cell_points, it->second) > 0) return Certificate::kNotGlobal;
+        for (const LatticePoint& p : outside(*cell_it))
+          if (lattice_side_of_sphere(cell_points, p) > 0) return Certificate::kNotGlobal;
       }
     }
-  return unknown ? Certificate::kUnknown : Certificate::kGlobal;
+  return Certificate::kGlobal;
 }
-
 
 }  // namespace sf::extract_detail

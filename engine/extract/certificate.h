@@ -4,6 +4,7 @@
 // global iff no voxel outside the window lies in its circumsphere, on-sphere voxels decided by the
 // same symbolic perturbation as the triangulation's (lattice_side_of_sphere).
 #include <cstdint>
+#include <functional>
 #include <utility>
 #include <vector>
 
@@ -29,25 +30,22 @@ struct Occupancy {
   }
 };
 
-// The voxels gathered around a window but outside it, bucketed by occupancy cell.
-struct Outsiders {
-  std::vector<std::pair<std::uint64_t, LatticePoint>> points;  // (packed cell, point), sorted
-};
+// The voxels outside the window in one occupied cell of the summary (the caller loads them on
+// demand: only cells that a sphere reaching out of the window meets are ever asked for).
+using OutsidePoints = std::function<const std::vector<LatticePoint>&(std::uint64_t packed_cell)>;
 
 enum class Certificate { kGlobal, kNotGlobal, kUnknown };
 
 // Is a cell of the window's triangulation, with circumball `ball`, a cell of the global one? The
-// window holds every voxel in the lattice box [lo, hi]; `gathered` (a larger box) every voxel of
-// which not in the window is in `out`; beyond it only the occupancy summary is known.
+// window holds every voxel in the lattice box [lo, hi]; `outside` gives the others by occupied cell.
 //  kGlobal     no voxel outside the window in or on the ball;
 //  kNotGlobal  one inside: the cell is not global (and not one the brick owns: a cell
 //              it owns has every vertex in the window);
-//  kUnknown    the ball meets an occupied cell beyond `gathered` (or is a sliver's huge ball):
-//              decide in a wider window.
+//  kUnknown    a sliver's huge ball (more than 65536 rows of summary cells): decide in a wider
+//              window.
 // Voxels on the sphere are decided by CGAL's symbolic perturbation, as the global triangulation
 // decides them.
 Certificate certify(const Ball& ball, const LatticePoint* cell_points[4], const std::int64_t lo[3],
-                    const std::int64_t hi[3], const std::int64_t glo[3], const std::int64_t ghi[3], const Outsiders& out,
-                    const Occupancy& occ);
+                    const std::int64_t hi[3], const OutsidePoints& outside, const Occupancy& occ);
 
 }  // namespace sf::extract_detail

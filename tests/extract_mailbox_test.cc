@@ -1,0 +1,91 @@
+// The brick-by-brick extraction's scratch mailboxes (storage/mailbox.h) and its vertex order
+// (engine/extract/voxel_set.h).
+#include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <stdexcept>
+#include <vector>
+
+#include "engine/extract/voxel_set.h"
+#include "storage/mailbox.h"
+
+namespace sf {
+namespace {
+
+TEST(Mailbox, CollectsEachDestinationInSourceThenPostingOrder) {
+  const ScratchFolder dir("scalefuse-mailbox-test");
+  Mailbox box(dir.path(), "numbers");
+  // Posted from many threads, out of order.
+  tbb::parallel_for(0, 64, [&](int i) {
+    const std::uint64_t dest = std::uint64_t(i % 4), src = std::uint64_t(63 - i);
+    box.post(dest, src, std::vector<std::uint32_t>{std::uint32_t(i), std::uint32_t(1000 + i)});
+  });
+  box.post(7, 0, std::vector<std::uint32_t>{});  // nothing: no destination
+  EXPECT_EQ(box.destinations(), (std::vector<std::uint64_t>{0, 1, 2, 3}));
+  for (std::uint64_t dest = 0; dest < 4; ++dest) {
+    const std::vector<std::uint32_t> got = box.collect<std::uint32_t>(dest);
+    ASSERT_EQ(got.size(), 32u);
+    // Sources ascend: src = 63 - i, so i descends.
+    for (std::size_t k = 0; k < 16; ++k) {
+      const std::uint32_t i = got[2 * k];
+      EXPECT_EQ(i % 4, dest);
+      EXPECT_EQ(got[2 * k + 1], 1000 + i);
+      if (k > 0) EXPECT_LT(i, got[2 * k - 2]);
+    }
+  }
+  EXPECT_TRUE(box.collect<std::uint32_t>(5).empty());
+  EXPECT_GT(box.bytes_raw(), 0u);
+  EXPECT_THROW(box.post(0, 0, std::vector<int>{1}), std::logic_error);  // the pass is over
+}
+
+TEST(Mailbox, LargeBlobsRoundTripAndFilesGoAway) {
+  std::filesystem::path file;
+  {
+    const ScratchFolder dir("scalefuse-mailbox-test");
+    Mailbox box(dir.path(), "big");
+    std::vector<std::uint64_t> a(1 << 20), b(1000);
+    for (std::size_t i = 0; i < a.size(); ++i) a[i] = i / 7;  // compressible, like voxel records
+    for (std::size_t i = 0; i < b.size(); ++i) b[i] = ~i;
+    box.post(9, 2, b);
+    box.post(9, 1, a);
+    const std::vector<std::uint64_t> got = box.collect<std::uint64_t>(9);
+    ASSERT_EQ(got.size(), a.size() + b.size());
+    EXPECT_TRUE(std::equal(a.begin(), a.end(), got.begin()));
+    EXPECT_TRUE(std::equal(b.begin(), b.end(), got.begin() + std::ptrdiff_t(a.size())));
+    file = dir.path() / "big.box";
+    EXPECT_TRUE(std::filesystem::exists(file));
+    EXPECT_LT(box.bytes_stored(), box.bytes_raw());
+  }
+  EXPECT_FALSE(std::filesystem::exists(file));
+  EXPECT_FALSE(std::filesystem::exists(file.parent_path()));
+}
+
+TEST(VertexOrder, MortonCodesByHand) {
+  using extract_detail::home_code;
+  using extract_detail::morton;
+  EXPECT_EQ(morton(1, 0, 0), 1u);
+  EXPECT_EQ(morton(0, 1, 0), 2u);
+  EXPECT_EQ(morton(0, 0, 1), 4u);
+  EXPECT_EQ(morton(3, 0, 0), 9u);           // x bits 0, 1 -> bits 0, 3
+  EXPECT_EQ(morton(0, 2, 1), 16u + 4u);     // y bit 1 -> bit 4; z bit 0 -> bit 2
+  EXPECT_EQ(morton((1u << 20), 0, 0), std::uint64_t{1} << 60);
+  // A voxel of level l at x is the point x * 2^(18 - l) of the deepest lattice.
+  EXPECT_EQ(home_code(VoxelKey::make(1, 1, 0, 0)), morton(1u << 17, 0, 0));
+  EXPECT_EQ(home_code(VoxelKey::make(18, 5, 6, 7)), morton(5, 6, 7));
+  // The root's upper face joins the last cell, as bricks take it.
+  EXPECT_EQ(home_code(VoxelKey::make(0, 1, 1, 1)), morton((1u << 18) - 1, (1u << 18) - 1, (1u << 18) - 1));
+  // Bricks of any level are contiguous: every voxel of brick (1, 0, 1) of level 2 lies in
+  // [code(brick), code(brick) + 8^(18-2)).
+  const std::uint64_t brick = morton(1, 0, 1) << (3 * 16);
+  for (const VoxelKey k : {VoxelKey::make(2, 1, 0, 1), VoxelKey::make(4, 7, 3, 4), VoxelKey::make(3, 3, 1, 2)}) {
+    EXPECT_GE(home_code(k), brick);
+    EXPECT_LT(home_code(k), brick + (std::uint64_t{1} << (3 * 16)));
+  }
+  EXPECT_GE(home_code(VoxelKey::make(2, 2, 0, 1)), brick + (std::uint64_t{1} << (3 * 16)));  // the next brick in x
+}
+
+}  // namespace
+}  // namespace sf
