@@ -4,6 +4,7 @@
 #     views, footprints 14.7 mm / 1.05 mm), mvs preset;
 #  2. the ten real Stanford bunny scans, laser preset.
 # Usage: bench/run_bench.sh [RUNS=3]   (needs build/bin/scalefuse and ../shared/data)
+#   env EXTRA="--extract bricks" adds options to every fuse (e.g. to compare extraction paths).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 RUNS="${1:-3}"
@@ -15,7 +16,7 @@ mkdir -p "$WORK"
 run() {  # name input config
   for i in $(seq "$RUNS"); do
     rm -rf "$WORK/$1.ply.job"  # a finished job there would only be re-extracted
-    $BIN fuse "$2" --config "configs/$3.toml" -o "$WORK/$1.ply" --stats "$WORK/$1.$i.json" -q >/dev/null
+    $BIN fuse "$2" --config "configs/$3.toml" -o "$WORK/$1.ply" --stats "$WORK/$1.$i.json" -q ${EXTRA:-} >/dev/null
   done
   python3 - "$WORK" "$1" "$RUNS" <<'PY'
 import json, statistics, sys

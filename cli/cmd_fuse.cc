@@ -358,7 +358,7 @@ void add_job_options(CLI::App* cmd, FuseArgs& args) {
       ->check(CLI::PositiveNumber);
   cmd->add_option("--checkpoint-seconds", args.checkpoint_seconds, "checkpoint at least this often (default 300 s)")
       ->check(CLI::PositiveNumber);
-  cmd->add_option("--export-vdb", args.export_vdb, "also write the regularized field as OpenVDB grids");
+  cmd->add_option("--export-vdb", args.export_vdb, "also write the regularized field as OpenVDB grids (holds every surviving voxel in memory, 32 bytes each)");
   cmd->add_option("--stats", args.stats_json, "write the run's statistics as JSON");
   cmd->add_flag("-q,--quiet", args.quiet, "no progress or summary");
 }

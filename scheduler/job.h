@@ -5,6 +5,7 @@
 //                    list with each depth map's file size and content hash, the last committed
 //                    checkpoint (depth maps integrated, manifest brick -> tile generation), stage
 //   DIR/tiles/       brick tiles (storage/tile_file.h), b_X_Y_Z.GEN.tile
+//   DIR/scratch/     the brick extraction's mailboxes while it runs (storage/mailbox.h)
 //   DIR/mesh.ply     the final mesh (also linked or copied to the requested output)
 //
 // A checkpoint is committed in one SQLite transaction after its tiles are written and fsynced;

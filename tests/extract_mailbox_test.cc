@@ -33,7 +33,9 @@ TEST(Mailbox, CollectsEachDestinationInSourceThenPostingOrder) {
       const std::uint32_t i = got[2 * k];
       EXPECT_EQ(i % 4, dest);
       EXPECT_EQ(got[2 * k + 1], 1000 + i);
-      if (k > 0) EXPECT_LT(i, got[2 * k - 2]);
+      if (k > 0) {
+        EXPECT_LT(i, got[2 * k - 2]);
+      }
     }
   }
   EXPECT_TRUE(box.collect<std::uint32_t>(5).empty());

@@ -275,6 +275,7 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
     }
     std::sort(c.begin(), c.end());
     c.erase(std::unique(c.begin(), c.end()), c.end());
+    c.shrink_to_fit();  // at most 512 cells: all bricks' lists live until the merge
     kept += out.size();
     dropped += v.size() - out.size();
     const VoxelKey first = out.front().key;

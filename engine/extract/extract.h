@@ -66,9 +66,8 @@ struct ExtractOptions {
   // "bricks", and for "auto" when the global tetrahedralization (kDelaunayBytesPerVoxel per voxel)
   // would not fit the memory limit.
   std::string mode = "auto";
-  // >= 0: tetrahedralize brick by brick (bricks of this octree level, windows in parallel) instead
-  // of at once; the kept cells, and so the mesh, are the same (see candidate cells below). -1: one
-  // global triangulation.
+  // >= 0: extract brick by brick, out of core (bricks of this octree level; brick_extract.h);
+  // the file is the same. -1: one global triangulation.
   int brick_level = -1;
   void check() const;             // throws InputError on a bad value
 };
@@ -87,10 +86,10 @@ struct ExtractStats {
   std::size_t coincident_voxels = 0;
   // Zero faces with negative voxels on both sides (inside the solid), emitted by neither side.
   std::size_t interior_zero_faces = 0;
-  // Brick by brick: windows triangulated, points triangulated over all windows (each voxel is
-  // in its own brick's window and in the halos of some others), windows redone with a wider halo
-  // because a cell's circumsphere reached beyond the window. tetrahedra and kept_tetrahedra then
-  // count the cells each brick owns in its window.
+  // Brick by brick: windows triangulated (one or more per brick, by owner level), points
+  // triangulated over all windows (each voxel is in its own brick's windows and in the halos of
+  // some others), windows redone with a wider halo because a sliver's circumsphere was too big to
+  // certify. tetrahedra and kept_tetrahedra then count the cells each brick owns in its windows.
   // window_cells_rejected: candidate cells a brick owned in its window that the certificate
   // showed not to be global (a voxel outside the window inside their circumsphere).
   std::size_t windows = 0, window_points = 0, windows_regrown = 0, window_cells_rejected = 0;
@@ -105,10 +104,11 @@ bool are_neighbours(VoxelKey a, VoxelKey b, int n);
 //  - The triangulation is built on the voxels' integer lattice coordinates at the finest level
 //    present (exact, and the same complex as their world positions); output positions are
 //    interpolated from RootCube::position in double.
-//  - Deterministic for a given voxel set, independent of thread count and input order: vertices
-//    are sorted by the voxel keys that define them (a zero voxel's key, or a crossing's key pair,
-//    lower key first); each face is rotated so that its smallest vertex index comes first
-//    (orientation kept), and faces are sorted.
+//  - Deterministic for a given voxel set, independent of thread count, input order and brick
+//    level: vertices are named by the voxel keys that define them (a zero voxel's key, or a
+//    crossing's key pair, lower key first) and ordered by the Morton code of the lower voxel's
+//    position, then by name (voxel_set.h); each face is rotated so that its smallest vertex index
+//    comes first (orientation kept), and faces are sorted.
 //  - Every vertex carries colour (interpolated, rounded), confidence (interpolated weight) and
 //    scale (interpolated cell size).
 //  - Runs its parallel work in the calling TBB arena. Time and memory are dominated by the
