@@ -117,7 +117,9 @@ TEST(Job, KilledAtSeveralPointsAndResumedGivesTheSameMesh) {
     EXPECT_FALSE(fs::exists(out));
     const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
     EXPECT_EQ(st["integrated"], 0) << "no depth map is in every tile yet";
-    if (kill_after >= 3) EXPECT_EQ(st["sweep"]["tiles"], tiles) << "the plan is recorded with the first checkpoint";
+    if (kill_after >= 3) {
+      EXPECT_EQ(st["sweep"]["tiles"], tiles) << "the plan is recorded with the first checkpoint";
+    }
     // The last checkpoint before the kill: every 3 steps, and at each tile's end.
     const int checkpointed = st["sweep"]["steps"];
     EXPECT_LE(checkpointed, kill_after);
