@@ -457,8 +457,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   if (hooks.scratch.empty()) temporary.emplace("scalefuse-extract");
   const std::filesystem::path scratch = hooks.scratch.empty() ? temporary->path() : hooks.scratch;
   const std::size_t limit = map.memory_limit();
-  BrickExtraction bricks(scratch, root, map.brick_level(), options.extract,
-                         limit > 0 ? limit / 4 : std::size_t{256} << 20);
+  BrickExtraction bricks(scratch, root, map.brick_level(), options.extract, limit > 0 ? limit : std::size_t{1} << 30);
   std::mutex add_mutex;
   stats.regularize = regularize_bricks(
       map, options.regularize, hooks.progress,

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <condition_variable>
 #include <cmath>
 #include <limits>
 #include <cstring>
@@ -91,6 +92,10 @@ struct BrickVoxels {
   }
 };
 
+// A window's triangulation and its side arrays, per point (CGAL's cells and vertices, about 550
+// bytes per point as measured on the global path, plus the window's own lists).
+constexpr std::size_t kWindowBytesPerPoint = 650;
+
 struct BrickInfo {
   std::uint64_t code;  // Morton code of the brick coordinates = its place in the output
   std::uint32_t x, y, z;
@@ -105,6 +110,12 @@ struct BrickExtraction::Impl {
   int B;  // brick level
   ExtractOptions options;
   std::size_t cache_bytes;
+  // Window triangulations in flight, by estimated bytes: a thread waits while the others' windows
+  // and its own would pass the budget (a window alone always runs).
+  std::size_t window_budget;
+  std::mutex window_mutex;
+  std::condition_variable window_freed;
+  std::size_t window_bytes = 0;
   std::atomic<int> finest{0};
   std::atomic<std::size_t> added{0};
   std::unique_ptr<Mailbox> incoming;
@@ -137,7 +148,7 @@ struct BrickExtraction::Impl {
 };
 
 BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level,
-                                 const ExtractOptions& options, std::size_t cache_bytes)
+                                 const ExtractOptions& options, std::size_t memory_budget)
     : impl_(std::make_unique<Impl>()) {
   options.check();
   if (brick_level < 0 || brick_level > kMaxLevel)
@@ -147,7 +158,8 @@ BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& 
   impl_->root = root;
   impl_->B = brick_level;
   impl_->options = options;
-  impl_->cache_bytes = cache_bytes;
+  impl_->cache_bytes = memory_budget / 4;
+  impl_->window_budget = memory_budget / 2;
   impl_->incoming = std::make_unique<Mailbox>(impl_->scratch, "incoming");
 }
 
@@ -449,6 +461,23 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
           std::vector<Tet> cells;
           bool certified = true;
           {
+            const std::size_t need = member_points.size() * kWindowBytesPerPoint;
+            {
+              std::unique_lock lock(m.window_mutex);
+              m.window_freed.wait(lock, [&] { return m.window_bytes == 0 || m.window_bytes + need <= m.window_budget; });
+              m.window_bytes += need;
+            }
+            struct Release {
+              Impl& m;
+              std::size_t bytes;
+              ~Release() {
+                {
+                  std::lock_guard lock(m.window_mutex);
+                  m.window_bytes -= bytes;
+                }
+                m.window_freed.notify_all();
+              }
+            } release{m, need};
             const DelaunayTetrahedralization dt(member_points, false, nullptr);
             dt.for_each_cell([&](const Tet& t) {
               if (!certified) return;

@@ -39,10 +39,11 @@ namespace sf {
 
 class BrickExtraction {
  public:
-  // Scratch files go to `scratch` (created; removed when done). `cache_bytes` bounds the voxels
-  // of neighbouring bricks kept decoded for the windows.
+  // Scratch files go to `scratch` (created; removed when done). Of `memory_budget`, a quarter
+  // holds decoded bricks for the windows and half the windows' triangulations in flight (a window
+  // larger than that runs alone).
   BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level, const ExtractOptions& options,
-                  std::size_t cache_bytes);
+                  std::size_t memory_budget);
   ~BrickExtraction();
   BrickExtraction(const BrickExtraction&) = delete;
   BrickExtraction& operator=(const BrickExtraction&) = delete;

@@ -491,7 +491,7 @@ Mesh extract_surface(const std::vector<SurfaceVoxel>& voxels, const RootCube& ro
   options.check();
   if (options.brick_level >= 0) {
     const ScratchFolder scratch("scalefuse-extract");
-    BrickExtraction bricks(scratch.path(), root, options.brick_level, options, std::size_t{256} << 20);
+    BrickExtraction bricks(scratch.path(), root, options.brick_level, options, std::size_t{1} << 30);
     bricks.add(voxels);
     MeshCollector mesh;
     bricks.run(mesh, progress, stats);
