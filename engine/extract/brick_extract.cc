@@ -75,12 +75,6 @@ std::uint32_t float_bits(float f) {
   return u;
 }
 
-std::string describe(VoxelKey k) {
-  std::ostringstream s;
-  s << "level " << k.level() << " (" << k.x() << ", " << k.y() << ", " << k.z() << ")";
-  return s.str();
-}
-
 // One brick's voxels in key order, with their lattice points (level G).
 struct BrickVoxels {
   std::vector<SurfaceVoxel> voxels;

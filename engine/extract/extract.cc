@@ -52,6 +52,7 @@ using extract_detail::Tet;
 using extract_detail::Attributes;
 using extract_detail::cell_distances;
 using extract_detail::cell_kind;
+using extract_detail::describe;
 using extract_detail::CellKind;
 using extract_detail::crossing_attributes;
 using extract_detail::keep_cell;
@@ -90,12 +91,6 @@ bool are_neighbours(VoxelKey a, VoxelKey b, int n) {
 namespace {
 
 constexpr double kStages = 4;  // "extract" progress steps: snap, march, weld, clean
-
-std::string describe(VoxelKey k) {
-  std::ostringstream s;
-  s << "level " << k.level() << " (" << k.x() << ", " << k.y() << ", " << k.z() << ")";
-  return s.str();
-}
 
 void validate(const SurfaceVoxel& v, std::size_t i) {
   const VoxelKey k = v.key;

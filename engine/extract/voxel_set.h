@@ -7,6 +7,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include "engine/extract/delaunay.h"
@@ -71,6 +73,13 @@ inline Attributes crossing_attributes(const Voxels& v, std::uint32_t lo, std::ui
 }
 
 inline std::uint8_t to_byte(float c) { return std::uint8_t(std::lround(std::clamp(c, 0.0f, 255.0f))); }
+
+// "level L (x, y, z)", for error messages.
+inline std::string describe(VoxelKey k) {
+  std::ostringstream s;
+  s << "level " << k.level() << " (" << k.x() << ", " << k.y() << ", " << k.z() << ")";
+  return s.str();
+}
 
 // The order of output vertices. A vertex is named by its voxels (a, a) or the crossing (a, b),
 // a < b in key order; vertices sort by the Morton code of a's position on the deepest lattice,
