@@ -109,6 +109,7 @@ nlohmann::json stats_json(const FusionStats& s, const MeshCounts& mesh) {
                   {"kept_tetrahedra", s.extract.kept_tetrahedra}, {"snapped_voxels", s.extract.snapped_voxels},
                   {"removed_components", s.extract.removed_components}, {"windows", s.extract.windows},
                   {"window_points", s.extract.window_points}, {"windows_regrown", s.extract.windows_regrown},
+                  {"windows_split", s.extract.windows_split},
                   {"window_cells_rejected", s.extract.window_cells_rejected},
                   {"mode", s.extract.by_brick ? "bricks" : "global"}};
   j["mesh"] = {{"vertices", mesh.vertices}, {"triangles", mesh.triangles}};

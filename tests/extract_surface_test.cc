@@ -13,7 +13,9 @@
 #include <random>
 #include <set>
 
+#include "engine/extract/brick_extract.h"
 #include "engine/extract/extract.h"
+#include "storage/mailbox.h"
 
 namespace sf {
 namespace {
@@ -403,6 +405,31 @@ TEST(ExtractSurface, BrickByBrickGivesTheGlobalMesh) {
       EXPECT_GE(st.window_points, st.voxels);
       EXPECT_EQ(st.windows == 1, brick_level == 0);
     }
+  }
+}
+
+TEST(ExtractSurface, WindowsSplitToFitTheMemoryBudgetGiveTheGlobalMesh) {
+  // A budget of a few thousand points per window: windows are split in halves between their
+  // owners, and their triangulations run one at a time. The mesh stays the global one.
+  const RootCube root = test_root();
+  std::vector<SurfaceVoxel> voxels = band(root, 4, 3.0, sphere({0.05, 0, 0}, 0.35));
+  const std::vector<SurfaceVoxel> fine = band(root, 6, 2.5, sphere({0.05, 0, 0}, 0.35),
+                                              [](const Eigen::Vector3d& p) { return p.z() > 0.1; });
+  voxels.insert(voxels.end(), fine.begin(), fine.end());
+  const ExtractOptions o;
+  const Mesh reference = extract_surface(voxels, root, o, nullptr, nullptr);
+  ASSERT_GT(reference.faces.size(), 1000u);
+  for (int brick_level : {1, 2}) {
+    SCOPED_TRACE("brick level " + std::to_string(brick_level));
+    const ScratchFolder scratch("scalefuse-split-test");
+    BrickExtraction bricks(scratch.path(), root, brick_level, o, std::size_t{4} << 20);  // 3,200 points a window
+    bricks.add(voxels);
+    MeshCollector mesh;
+    ExtractStats st;
+    tbb::task_arena arena(2);
+    arena.execute([&] { bricks.run(mesh, nullptr, &st); });
+    EXPECT_TRUE(same_mesh(mesh.mesh, reference));
+    EXPECT_GT(st.windows_split, 0u);
   }
 }
 

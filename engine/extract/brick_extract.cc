@@ -93,7 +93,6 @@ constexpr std::size_t kWindowBytesPerPoint = 650;
 struct BrickInfo {
   std::uint64_t code;  // Morton code of the brick coordinates = its place in the output
   std::uint32_t x, y, z;
-  int lmin;            // coarsest level of its voxels
 };
 
 }  // namespace
@@ -118,6 +117,7 @@ struct BrickExtraction::Impl {
   int G = 0;                      // lattice level: max(finest, B)
   std::int64_t side = 0, brick_side = 0;
   std::vector<BrickInfo> bricks;  // bricks with voxels, by code
+  std::uint32_t levels = 0;       // bit l: some voxel of level l
   Occupancy occ;
   std::unique_ptr<Mailbox> survivors;
 
@@ -244,6 +244,7 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
   bricks.resize(codes.size());
   std::vector<std::vector<std::uint64_t>> cells(codes.size());
   std::atomic<std::size_t> kept{0}, dropped{0}, done{0};
+  std::atomic<std::uint32_t> level_bits{0};
   tbb::parallel_for(std::size_t(0), codes.size(), [&](std::size_t bi) {
     std::vector<SurfaceVoxel> v = incoming->collect<SurfaceVoxel>(codes[bi]);
     std::sort(v.begin(), v.end(), [](const SurfaceVoxel& a, const SurfaceVoxel& b) { return a.key < b.key; });
@@ -270,15 +271,16 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
     }
     std::vector<SurfaceVoxel> out;
     out.reserve(v.size());
-    int lmin = kMaxLevel;
+    std::uint32_t bits = 0;
     std::vector<std::uint64_t>& c = cells[bi];
     for (std::size_t i = 0; i < v.size(); ++i) {
       if (drop[i]) continue;
       out.push_back(v[i]);
-      lmin = std::min(lmin, v[i].key.level());
+      bits |= 1u << v[i].key.level();
       const LatticePoint p = lattice(v[i].key);
       c.push_back(Occupancy::pack(p[0] / occ.side, p[1] / occ.side, p[2] / occ.side));
     }
+    level_bits.fetch_or(bits);
     std::sort(c.begin(), c.end());
     c.erase(std::unique(c.begin(), c.end()), c.end());
     c.shrink_to_fit();  // at most 512 cells: all bricks' lists live until the merge
@@ -290,7 +292,7 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
     const auto brick_axis = [&](std::uint32_t coord) {
       return std::uint32_t(std::min<std::int64_t>((std::int64_t(coord) << s) / brick_side, last));
     };
-    bricks[bi] = {codes[bi], brick_axis(first.x()), brick_axis(first.y()), brick_axis(first.z()), lmin};
+    bricks[bi] = {codes[bi], brick_axis(first.x()), brick_axis(first.y()), brick_axis(first.z())};
     survivors->post(codes[bi], codes[bi], out);
     report(progress, "prepare", double(++done), double(codes.size()));
   });
@@ -304,6 +306,7 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
   tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
   occ.cells.erase(std::unique(occ.cells.begin(), occ.cells.end()), occ.cells.end());
   incoming.reset();
+  levels = level_bits.load();
   st->voxels = kept.load();
   st->coincident_voxels = dropped.load();
 }
@@ -324,7 +327,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
   // --- Pass 1: windows -------------------------------------------------------------------------
   Mailbox piece_voxels(m.scratch, "piece_voxels"), piece_cells(m.scratch, "piece_cells"), offers(m.scratch, "offers");
   struct Counters {
-    std::size_t tetrahedra = 0, kept = 0, windows = 0, points = 0, regrown = 0, rejected = 0;
+    std::size_t tetrahedra = 0, kept = 0, windows = 0, points = 0, regrown = 0, split = 0, rejected = 0;
   };
   tbb::enumerable_thread_specific<Counters> counters;
   std::atomic<std::size_t> done{0};
@@ -343,212 +346,299 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         }
         return it->second.get();
       };
-      // Windows by owner level: the cells owned by X's voxels of level L have every vertex
-      // within reach(L) = (1 + n) h(L) of the owner, so the box of X's level-L voxels grown by
-      // reach(L) holds them. Coarse levels reach far but are usually few and local; the window of
-      // a level is shared by every finer level whose box it contains.
-      struct Group {
-        std::int64_t box[2][3];  // X's voxels of these levels (lattice, closed)
-        std::int64_t reach;
-        std::uint32_t levels = 0;  // bit L: owners of level L
+      // Windows by owner level. A cell X owns has its coarsest vertex, of level L, in X, and by
+      // 7.1 every other vertex, of level l >= L, within h(L) + n h(l) of it on each axis. So the
+      // window of X's level-L owners needs the level-l voxels of the owners' box grown by that
+      // much and no others: its triangulation has every global cell whose vertices it holds, and
+      // the certificate tells the cells that are not global apart. Fine voxels thus need a margin
+      // of about h(L), not (1 + n) h(L) — dense detail next to a coarse voxel is what a window is
+      // mostly made of. A finer level shares a window whose boxes hold its own; a window too big
+      // for the memory budget is split in halves between its owners while they span more than
+      // 2 h(L).
+      const BrickVoxels& own = *hold(X.code);
+      const auto h = [&](int l) { return std::int64_t{1} << (m.G - l); };
+      struct Window {
+        std::uint32_t levels = 0;  // owner levels
+        std::int64_t region[2][3];  // owners: [lo, hi) in lattice coordinates
+        std::int64_t extra = 0;    // regrowth margin (a sliver's ball too big to certify)
       };
-      std::vector<Group> groups;
-      {
-        const BrickVoxels& own = *hold(X.code);
-        std::int64_t lbox[kMaxLevel + 1][2][3];
-        std::uint32_t present = 0;
+      // Voxels of level l are in the window iff in box[max(l, first)] (closed lattice boxes).
+      struct Extent {
+        std::int64_t box[kMaxLevel + 1][2][3];
+        std::int64_t owners[2][3];  // the owners' bounding box
+        std::int64_t inner[2][3];   // every voxel in it is in the window, whatever its level
+        std::int64_t outer[2][3];   // every voxel in the window is in it
+        int first = 0;              // the coarsest owner level in the region
+        bool has_owners = false;
+      };
+      const auto in_region = [](const Window& w, const LatticePoint& p) {
+        return p[0] >= w.region[0][0] && p[0] < w.region[1][0] && p[1] >= w.region[0][1] && p[1] < w.region[1][1] &&
+               p[2] >= w.region[0][2] && p[2] < w.region[1][2];
+      };
+      const auto extent_of = [&](const Window& w) {
+        Extent e;
+        std::int64_t ob[kMaxLevel + 1][2][3];
+        std::uint32_t with_owners = 0;
         for (std::size_t i = 0; i < own.voxels.size(); ++i) {
           const int L = own.voxels[i].key.level();
           const LatticePoint& p = own.points[i];
-          if (!(present >> L & 1)) {
-            present |= 1u << L;
-            for (int a = 0; a < 3; ++a) lbox[L][0][a] = lbox[L][1][a] = p[a];
+          if (!(w.levels >> L & 1) || !in_region(w, p)) continue;
+          if (!(with_owners >> L & 1)) {
+            with_owners |= 1u << L;
+            for (int a = 0; a < 3; ++a) ob[L][0][a] = ob[L][1][a] = p[a];
           }
           for (int a = 0; a < 3; ++a) {
-            lbox[L][0][a] = std::min<std::int64_t>(lbox[L][0][a], p[a]);
-            lbox[L][1][a] = std::max<std::int64_t>(lbox[L][1][a], p[a]);
+            ob[L][0][a] = std::min<std::int64_t>(ob[L][0][a], p[a]);
+            ob[L][1][a] = std::max<std::int64_t>(ob[L][1][a], p[a]);
           }
         }
+        e.has_owners = with_owners != 0;
+        if (!e.has_owners) return e;
+        while (!(with_owners >> e.first & 1)) ++e.first;
+        for (int a = 0; a < 3; ++a) {
+          e.owners[0][a] = e.inner[0][a] = e.outer[0][a] = side;
+          e.owners[1][a] = e.inner[1][a] = e.outer[1][a] = 0;
+        }
+        bool first = true;
+        for (int l = e.first; l <= m.G; ++l) {
+          if (l != e.first && !(m.levels >> l & 1)) continue;  // no voxel of level l anywhere
+          std::int64_t(&b)[2][3] = e.box[l];
+          for (int a = 0; a < 3; ++a) {
+            b[0][a] = side;
+            b[1][a] = 0;
+          }
+          for (int L = e.first; L <= l; ++L) {
+            if (!(with_owners >> L & 1)) continue;
+            const std::int64_t margin = h(L) + n * h(l) + w.extra;
+            for (int a = 0; a < 3; ++a) {
+              b[0][a] = std::min(b[0][a], std::max<std::int64_t>(0, ob[L][0][a] - margin));
+              b[1][a] = std::max(b[1][a], std::min(side, ob[L][1][a] + margin));
+            }
+          }
+          for (int a = 0; a < 3; ++a) {
+            e.outer[0][a] = std::min(e.outer[0][a], b[0][a]);
+            e.outer[1][a] = std::max(e.outer[1][a], b[1][a]);
+            e.inner[0][a] = first ? b[0][a] : std::max(e.inner[0][a], b[0][a]);
+            e.inner[1][a] = first ? b[1][a] : std::min(e.inner[1][a], b[1][a]);
+          }
+          first = false;
+        }
+        for (int L = 0; L <= kMaxLevel; ++L)
+          if (with_owners >> L & 1)
+            for (int a = 0; a < 3; ++a) {
+              e.owners[0][a] = std::min(e.owners[0][a], ob[L][0][a]);
+              e.owners[1][a] = std::max(e.owners[1][a], ob[L][1][a]);
+            }
+        return e;
+      };
+      std::vector<Window> windows;
+      {
+        std::uint32_t present = 0;
+        for (const SurfaceVoxel& s : own.voxels) present |= 1u << s.key.level();
         for (int L = 0; L <= kMaxLevel; ++L) {  // coarse to fine
           if (!(present >> L & 1)) continue;
-          const std::int64_t reach = (1 + n) * (std::int64_t{1} << (m.G - L));
+          Window alone;
+          alone.levels = 1u << L;
+          for (int a = 0; a < 3; ++a) {
+            alone.region[0][a] = 0;
+            alone.region[1][a] = side + 1;
+          }
+          const Extent mine = extent_of(alone);
           bool joined = false;
-          for (Group& g : groups) {
+          for (Window& w : windows) {
+            const Extent theirs = extent_of(w);
             bool inside = true;
-            for (int a = 0; a < 3; ++a)
-              inside = inside && lbox[L][0][a] - reach >= g.box[0][a] - g.reach && lbox[L][1][a] + reach <= g.box[1][a] + g.reach;
+            for (int l = L; l <= m.G && inside; ++l) {
+              if (!(m.levels >> l & 1)) continue;
+              for (int a = 0; a < 3; ++a)
+                inside = inside && mine.box[l][0][a] >= theirs.box[l][0][a] && mine.box[l][1][a] <= theirs.box[l][1][a];
+            }
             if (inside) {
-              g.levels |= 1u << L;
+              w.levels |= 1u << L;
               joined = true;
               break;
             }
           }
-          if (joined) continue;
-          Group g;
-          std::memcpy(g.box, lbox[L], sizeof(g.box));
-          g.reach = reach;
-          g.levels = 1u << L;
-          groups.push_back(g);
+          if (!joined) windows.push_back(alone);
         }
       }
       // The cells X owns, over all its windows, by their voxels.
       std::vector<std::array<const SurfaceVoxel*, 4>> owned;
       std::vector<SnapOffer> offered;
-      for (Group& group : groups) {
-        for (;;) {
-          std::int64_t lo[3], hi[3];
-          for (int a = 0; a < 3; ++a) {
-            lo[a] = std::max<std::int64_t>(0, group.box[0][a] - group.reach);
-            hi[a] = std::min<std::int64_t>(side, group.box[1][a] + group.reach);
-          }
-          const auto in_window = [&](const LatticePoint& p) {
-            return p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2];
-          };
-          std::vector<const SurfaceVoxel*> members;
-          std::vector<LatticePoint> member_points;
-          {
-            std::vector<std::pair<std::uint64_t, std::pair<const SurfaceVoxel*, LatticePoint>>> found;
-            for (std::int64_t z = brick_axis_of(lo[2]); z <= brick_axis_of(hi[2]); ++z)
-              for (std::int64_t y = brick_axis_of(lo[1]); y <= brick_axis_of(hi[1]); ++y)
-                for (std::int64_t x = brick_axis_of(lo[0]); x <= brick_axis_of(hi[0]); ++x) {
-                  const BrickVoxels* b = hold(morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
-                  if (!b) continue;
-                  for (std::size_t i = 0; i < b->voxels.size(); ++i)
-                    if (in_window(b->points[i])) found.push_back({b->voxels[i].key.bits, {&b->voxels[i], b->points[i]}});
-                }
-            // Local index order = key order, as in the global extraction.
-            std::sort(found.begin(), found.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
-            members.resize(found.size());
-            member_points.resize(found.size());
-            for (std::size_t i = 0; i < found.size(); ++i) {
-              members[i] = found[i].second.first;
-              member_points[i] = found[i].second.second;
-            }
-          }
-          // The certificate's voxels outside the window, loaded per occupied cell when a sphere
-          // reaching out of the window meets it.
-          std::unordered_map<std::uint64_t, std::vector<LatticePoint>> outside_cells;
-          const OutsidePoints outside = [&](std::uint64_t cell) -> const std::vector<LatticePoint>& {
-            auto [it, fresh] = outside_cells.try_emplace(cell);
-            if (!fresh) return it->second;
-            const std::int64_t c[3] = {std::int64_t(cell & 0x1FFFFF), std::int64_t((cell >> 21) & 0x1FFFFF),
-                                       std::int64_t(cell >> 42)};
-            const BrickVoxels* b = hold(morton(std::uint32_t(brick_axis_of(c[0] * m.occ.side)),
-                                               std::uint32_t(brick_axis_of(c[1] * m.occ.side)),
-                                               std::uint32_t(brick_axis_of(c[2] * m.occ.side))));
-            if (!b) return it->second;
-            for (auto e = std::lower_bound(b->by_cell.begin(), b->by_cell.end(),
-                                           std::pair<std::uint64_t, std::uint32_t>{cell, 0});
-                 e != b->by_cell.end() && e->first == cell; ++e)
-              if (!in_window(b->points[e->second])) it->second.push_back(b->points[e->second]);
-            return it->second;
-          };
-          Voxels v;
-          v.key.resize(members.size());
-          v.distance.resize(members.size());
-          for (std::size_t i = 0; i < members.size(); ++i) {
-            v.key[i] = members[i]->key;
-            v.distance[i] = members[i]->distance;
-          }
-          const bool whole = lo[0] == 0 && lo[1] == 0 && lo[2] == 0 && hi[0] == side && hi[1] == side && hi[2] == side;
-          Counters mine;
-          std::vector<Tet> cells;
-          bool certified = true;
-          {
-            const std::size_t need = member_points.size() * kWindowBytesPerPoint;
-            {
-              std::unique_lock lock(m.window_mutex);
-              m.window_freed.wait(lock, [&] { return m.window_bytes == 0 || m.window_bytes + need <= m.window_budget; });
-              m.window_bytes += need;
-            }
-            struct Release {
-              Impl& m;
-              std::size_t bytes;
-              ~Release() {
-                {
-                  std::lock_guard lock(m.window_mutex);
-                  m.window_bytes -= bytes;
-                }
-                m.window_freed.notify_all();
+      while (!windows.empty()) {
+        const Window window = windows.back();
+        windows.pop_back();
+        const Extent ext = extent_of(window);
+        if (!ext.has_owners) continue;
+        const auto in_window = [&](const LatticePoint& p, int level) {
+          const std::int64_t(&b)[2][3] = ext.box[std::max(level, ext.first)];
+          return p[0] >= b[0][0] && p[0] <= b[1][0] && p[1] >= b[0][1] && p[1] <= b[1][1] && p[2] >= b[0][2] &&
+                 p[2] <= b[1][2];
+        };
+        std::vector<const SurfaceVoxel*> members;
+        std::vector<LatticePoint> member_points;
+        {
+          std::vector<std::pair<std::uint64_t, std::pair<const SurfaceVoxel*, LatticePoint>>> found;
+          for (std::int64_t z = brick_axis_of(ext.outer[0][2]); z <= brick_axis_of(ext.outer[1][2]); ++z)
+            for (std::int64_t y = brick_axis_of(ext.outer[0][1]); y <= brick_axis_of(ext.outer[1][1]); ++y)
+              for (std::int64_t x = brick_axis_of(ext.outer[0][0]); x <= brick_axis_of(ext.outer[1][0]); ++x) {
+                const BrickVoxels* b = hold(morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
+                if (!b) continue;
+                for (std::size_t i = 0; i < b->voxels.size(); ++i)
+                  if (in_window(b->points[i], b->voxels[i].key.level()))
+                    found.push_back({b->voxels[i].key.bits, {&b->voxels[i], b->points[i]}});
               }
-            } release{m, need};
-            const DelaunayTetrahedralization dt(member_points, false, nullptr);
-            dt.for_each_cell([&](const Tet& t) {
-              if (!certified) return;
-              int owner = 0;
-              for (int k = 1; k < 4; ++k) {
-                const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
-                if (lk < lo_ || (lk == lo_ && t[k] < t[owner])) owner = k;
-              }
-              if (!(group.levels >> v.key[t[owner]].level() & 1)) return;
-              const LatticePoint& op = member_points[t[owner]];
-              if (morton(std::uint32_t(brick_axis_of(op[0])), std::uint32_t(brick_axis_of(op[1])),
-                         std::uint32_t(brick_axis_of(op[2]))) != X.code)
-                return;
-              ++mine.tetrahedra;
-              if (!keep_cell(t, v, n)) return;
-              ++mine.kept;
-              if (cell_kind(cell_distances(t, v.distance)) == CellKind::kNever) return;
-              if (!whole) {
-                const LatticePoint* corners[4] = {&member_points[t[0]], &member_points[t[1]], &member_points[t[2]],
-                                                  &member_points[t[3]]};
-                Ball ball;
-                const Certificate c = circumball(corners, &ball) ? certify(ball, corners, lo, hi, outside, m.occ)
-                                                                 : Certificate::kUnknown;
-                if (c == Certificate::kNotGlobal) {
-                  ++mine.rejected;
-                  return;
-                }
-                if (c == Certificate::kUnknown) {
-                  certified = false;
-                  return;
-                }
-              }
-              cells.push_back(t);
-            });
+          // Local index order = key order, as in the global extraction.
+          std::sort(found.begin(), found.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
+          members.resize(found.size());
+          member_points.resize(found.size());
+          for (std::size_t i = 0; i < found.size(); ++i) {
+            members[i] = found[i].second.first;
+            member_points[i] = found[i].second.second;
           }
-          ++count.windows;
-          count.points += member_points.size();
-          if (!certified) {
-            ++count.regrown;
-            group.reach *= 2;
+        }
+        const std::size_t need = member_points.size() * kWindowBytesPerPoint;
+        {
+          int widest = 0;
+          for (int a = 1; a < 3; ++a)
+            if (ext.owners[1][a] - ext.owners[0][a] > ext.owners[1][widest] - ext.owners[0][widest]) widest = a;
+          if (need > m.window_budget && ext.owners[1][widest] - ext.owners[0][widest] > 2 * h(ext.first)) {
+            const std::int64_t mid = (ext.owners[0][widest] + ext.owners[1][widest] + 1) / 2;
+            Window lower = window, upper = window;
+            lower.region[1][widest] = upper.region[0][widest] = mid;
+            windows.push_back(upper);
+            windows.push_back(lower);
+            ++count.split;
             continue;
           }
-          count.tetrahedra += mine.tetrahedra;
-          count.kept += mine.kept;
-          count.rejected += mine.rejected;
-          for (const Tet& t : cells) {
-            owned.push_back({members[t[0]], members[t[1]], members[t[2]], members[t[3]]});
-            const std::array<float, 4> d = cell_distances(t, v.distance);
-            if (!(snap_fraction > 0 && cell_kind(d) == CellKind::kMixed)) continue;
-            for (int i = 0; i < 4; ++i)
-              for (int j = i + 1; j < 4; ++j) {
-                const std::uint32_t a = std::min(t[i], t[j]), b = std::max(t[i], t[j]);
-                const float da = v.distance[a], db = v.distance[b];
-                if (!((da < 0 && db > 0) || (da > 0 && db < 0))) continue;
-                const double f = crossing_fraction(da, db);
-                const auto offer = [&](std::uint32_t target, std::uint32_t other, double fraction) {
-                  const SurfaceVoxel& sa = *members[a];
-                  const SurfaceVoxel& sb = *members[b];
-                  const auto mix = [f](float x, float y) { return float(double(x) + f * (double(y) - double(x))); };
-                  SnapOffer o{};
-                  o.target = v.key[target].bits;
-                  o.other = v.key[other].bits;
-                  o.fraction_bits = float_bits(float(fraction));
-                  const Eigen::Vector3d p = lerp(m.root.position(sa.key), m.root.position(sb.key), f);
-                  for (int c = 0; c < 3; ++c) {
-                    o.position[c] = p[c];
-                    o.colour[c] = mix(sa.colour[c], sb.colour[c]);
-                  }
-                  o.weight = mix(sa.weight, sb.weight);
-                  o.scale = mix(float(m.root.cell_size(sa.key.level())), float(m.root.cell_size(sb.key.level())));
-                  offered.push_back(o);
-                };
-                if (f < snap_fraction) offer(a, b, f);
-                if (1.0 - f < snap_fraction) offer(b, a, 1.0 - f);
-              }
+        }
+        // The certificate's voxels outside the window, loaded per occupied cell when a sphere
+        // reaching out of the window's inner box meets it.
+        std::unordered_map<std::uint64_t, std::vector<LatticePoint>> outside_cells;
+        const OutsidePoints outside = [&](std::uint64_t cell) -> const std::vector<LatticePoint>& {
+          auto [it, fresh] = outside_cells.try_emplace(cell);
+          if (!fresh) return it->second;
+          const std::int64_t c[3] = {std::int64_t(cell & 0x1FFFFF), std::int64_t((cell >> 21) & 0x1FFFFF),
+                                     std::int64_t(cell >> 42)};
+          const BrickVoxels* b = hold(morton(std::uint32_t(brick_axis_of(c[0] * m.occ.side)),
+                                             std::uint32_t(brick_axis_of(c[1] * m.occ.side)),
+                                             std::uint32_t(brick_axis_of(c[2] * m.occ.side))));
+          if (!b) return it->second;
+          for (auto e = std::lower_bound(b->by_cell.begin(), b->by_cell.end(),
+                                         std::pair<std::uint64_t, std::uint32_t>{cell, 0});
+               e != b->by_cell.end() && e->first == cell; ++e)
+            if (!in_window(b->points[e->second], b->voxels[e->second].key.level()))
+              it->second.push_back(b->points[e->second]);
+          return it->second;
+        };
+        Voxels v;
+        v.key.resize(members.size());
+        v.distance.resize(members.size());
+        for (std::size_t i = 0; i < members.size(); ++i) {
+          v.key[i] = members[i]->key;
+          v.distance[i] = members[i]->distance;
+        }
+        const bool whole = ext.inner[0][0] == 0 && ext.inner[0][1] == 0 && ext.inner[0][2] == 0 &&
+                           ext.inner[1][0] == side && ext.inner[1][1] == side && ext.inner[1][2] == side;
+        Counters mine;
+        std::vector<Tet> cells;
+        bool certified = true;
+        {
+          {
+            std::unique_lock lock(m.window_mutex);
+            m.window_freed.wait(lock, [&] { return m.window_bytes == 0 || m.window_bytes + need <= m.window_budget; });
+            m.window_bytes += need;
           }
-          break;
+          struct Release {
+            Impl& m;
+            std::size_t bytes;
+            ~Release() {
+              {
+                std::lock_guard lock(m.window_mutex);
+                m.window_bytes -= bytes;
+              }
+              m.window_freed.notify_all();
+            }
+          } release{m, need};
+          const DelaunayTetrahedralization dt(member_points, false, nullptr);
+          dt.for_each_cell([&](const Tet& t) {
+            if (!certified) return;
+            int owner = 0;
+            for (int k = 1; k < 4; ++k) {
+              const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
+              if (lk < lo_ || (lk == lo_ && t[k] < t[owner])) owner = k;
+            }
+            if (!(window.levels >> v.key[t[owner]].level() & 1)) return;
+            const LatticePoint& op = member_points[t[owner]];
+            if (!in_region(window, op) ||
+                morton(std::uint32_t(brick_axis_of(op[0])), std::uint32_t(brick_axis_of(op[1])),
+                       std::uint32_t(brick_axis_of(op[2]))) != X.code)
+              return;
+            ++mine.tetrahedra;
+            if (!keep_cell(t, v, n)) return;
+            ++mine.kept;
+            if (cell_kind(cell_distances(t, v.distance)) == CellKind::kNever) return;
+            if (!whole) {
+              const LatticePoint* corners[4] = {&member_points[t[0]], &member_points[t[1]], &member_points[t[2]],
+                                                &member_points[t[3]]};
+              Ball ball;
+              const Certificate c = circumball(corners, &ball)
+                                        ? certify(ball, corners, ext.inner[0], ext.inner[1], outside, m.occ)
+                                        : Certificate::kUnknown;
+              if (c == Certificate::kNotGlobal) {
+                ++mine.rejected;
+                return;
+              }
+              if (c == Certificate::kUnknown) {
+                certified = false;
+                return;
+              }
+            }
+            cells.push_back(t);
+          });
+        }
+        ++count.windows;
+        count.points += member_points.size();
+        if (!certified) {
+          ++count.regrown;
+          Window wider = window;
+          wider.extra = window.extra > 0 ? 2 * window.extra : (1 + n) * h(ext.first);
+          windows.push_back(wider);
+          continue;
+        }
+        count.tetrahedra += mine.tetrahedra;
+        count.kept += mine.kept;
+        count.rejected += mine.rejected;
+        for (const Tet& t : cells) {
+          owned.push_back({members[t[0]], members[t[1]], members[t[2]], members[t[3]]});
+          const std::array<float, 4> d = cell_distances(t, v.distance);
+          if (!(snap_fraction > 0 && cell_kind(d) == CellKind::kMixed)) continue;
+          for (int i = 0; i < 4; ++i)
+            for (int j = i + 1; j < 4; ++j) {
+              const std::uint32_t a = std::min(t[i], t[j]), b = std::max(t[i], t[j]);
+              const float da = v.distance[a], db = v.distance[b];
+              if (!((da < 0 && db > 0) || (da > 0 && db < 0))) continue;
+              const double f = crossing_fraction(da, db);
+              const auto offer = [&](std::uint32_t target, std::uint32_t other, double fraction) {
+                const SurfaceVoxel& sa = *members[a];
+                const SurfaceVoxel& sb = *members[b];
+                const auto mix = [f](float x, float y) { return float(double(x) + f * (double(y) - double(x))); };
+                SnapOffer o{};
+                o.target = v.key[target].bits;
+                o.other = v.key[other].bits;
+                o.fraction_bits = float_bits(float(fraction));
+                const Eigen::Vector3d p = lerp(m.root.position(sa.key), m.root.position(sb.key), f);
+                for (int c = 0; c < 3; ++c) {
+                  o.position[c] = p[c];
+                  o.colour[c] = mix(sa.colour[c], sb.colour[c]);
+                }
+                o.weight = mix(sa.weight, sb.weight);
+                o.scale = mix(float(m.root.cell_size(sa.key.level())), float(m.root.cell_size(sb.key.level())));
+                offered.push_back(o);
+              };
+              if (f < snap_fraction) offer(a, b, f);
+              if (1.0 - f < snap_fraction) offer(b, a, 1.0 - f);
+            }
         }
       }
       if (!owned.empty()) {
@@ -596,6 +686,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
     st.windows += c.windows;
     st.window_points += c.points;
     st.windows_regrown += c.regrown;
+    st.windows_split += c.split;
     st.window_cells_rejected += c.rejected;
   }
   {

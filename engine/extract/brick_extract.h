@@ -7,9 +7,10 @@
 // scratch files; then passes over the bricks, each in parallel, exchange records through
 // mailboxes (storage/mailbox.h, every record written once and read once):
 //   0 prepare       sort each brick's voxels, check them, drop coarser coincident twins, index
-//                   the bricks (coarsest level, occupancy summary)
-//   1 tetrahedralize  each brick X triangulates its window (every voxel within (1 + n) h(Lmin(X))
-//                   of its box), keeps the certified global cells it owns (coarsest vertex in X),
+//                   the bricks (occupancy summary, levels present)
+//   1 tetrahedralize  each brick X triangulates a window per owner level L (the level-l voxels
+//                   within h(L) + n h(l) of its level-L voxels' box; split between the owners
+//                   when too big for the budget), keeps the certified global cells it owns (coarsest vertex in X),
 //                   filtered by 7.1 and able to emit; posts them with their voxels, and posts
 //                   7.2 snap offers (the closest crossing per voxel) to each voxel's brick
 //   2 snap          each brick decides its voxels' snaps from all offers (as the global

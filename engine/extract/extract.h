@@ -89,10 +89,11 @@ struct ExtractStats {
   // Brick by brick: windows triangulated (one or more per brick, by owner level), points
   // triangulated over all windows (each voxel is in its own brick's windows and in the halos of
   // some others), windows redone with a wider halo because a sliver's circumsphere was too big to
-  // certify. tetrahedra and kept_tetrahedra then count the cells each brick owns in its windows.
+  // certify, windows split in halves between their owners to fit the memory budget. tetrahedra
+  // and kept_tetrahedra then count the cells each brick owns in its windows.
   // window_cells_rejected: candidate cells a brick owned in its window that the certificate
   // showed not to be global (a voxel outside the window inside their circumsphere).
-  std::size_t windows = 0, window_points = 0, windows_regrown = 0, window_cells_rejected = 0;
+  std::size_t windows = 0, window_points = 0, windows_regrown = 0, windows_split = 0, window_cells_rejected = 0;
   bool by_brick = false;  // which tetrahedralization ran
 };
 
