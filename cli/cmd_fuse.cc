@@ -110,6 +110,7 @@ nlohmann::json stats_json(const FusionStats& s, const MeshCounts& mesh) {
                   {"removed_components", s.extract.removed_components}, {"windows", s.extract.windows},
                   {"window_points", s.extract.window_points}, {"windows_regrown", s.extract.windows_regrown},
                   {"windows_split", s.extract.windows_split},
+                  {"resumed_items", s.extract.resumed_items},
                   {"window_cells_rejected", s.extract.window_cells_rejected},
                   {"mode", s.extract.by_brick ? "bricks" : "global"}};
   j["mesh"] = {{"vertices", mesh.vertices}, {"triangles", mesh.triangles}};
@@ -257,6 +258,8 @@ void run_fuse(const FuseArgs& a) {
   job_options.allow_new_inputs = a.add;
   if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_AFTER")) job_options.kill_after = std::strtoull(k, nullptr, 10);
   if (const char* k = std::getenv("SCALEFUSE_TEST_TERM_AFTER")) job_options.term_after = std::strtoull(k, nullptr, 10);
+  if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_IN_EXTRACTION"))
+    job_options.kill_in_extraction = std::strtoull(k, nullptr, 10);
   const std::string identity = params.assignments(kIntegrationParameters);
   const std::string output_abs = std::filesystem::absolute(a.output).string();
   if (implicit_job && std::filesystem::exists(job_options.dir / "job.sqlite")) {

@@ -110,6 +110,16 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// What shapes the regularized voxels and the brick extraction's passes (not the memory budget,
+// thread count or extraction mode: the result does not depend on them).
+std::string extraction_signature(const FusionOptions& o, int brick_level) {
+  std::ostringstream s;
+  s << std::hexfloat << "tau0 " << o.regularize.tau0 << " tau1 " << o.regularize.tau1 << " n "
+    << o.extract.neighbourhood_n << " snap " << o.extract.snap_fraction << " components "
+    << o.extract.min_component_triangles << " bricks " << brick_level;
+  return s.str();
+}
+
 void clip_to_box(DepthFrame& f, const std::optional<Eigen::AlignedBox3d>& box) {
   if (!box) return;
   for (std::size_t i = 0; i < f.size(); ++i)
@@ -452,36 +462,44 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   }
   // Brick by brick: the raw field is never in memory at once. The survivors go to the brick
   // extraction's scratch files as each brick is regularized; the global path (when they are few
-  // enough) reads them back.
+  // enough) reads them back. A job keeps a record of both, so that a killed run resumes brick by
+  // brick: regularization skips the bricks already handed over, extraction the bricks each of
+  // its passes finished.
   std::optional<ScratchFolder> temporary;
   if (hooks.scratch.empty()) temporary.emplace("scalefuse-extract");
   const std::filesystem::path scratch = hooks.scratch.empty() ? temporary->path() : hooks.scratch;
   const std::size_t limit = map.memory_limit();
-  BrickExtraction bricks(scratch, root, map.brick_level(), options.extract, limit > 0 ? limit : std::size_t{1} << 30);
-  std::mutex add_mutex;
-  stats.regularize = regularize_bricks(
-      map, options.regularize, hooks.progress,
-      [&](BrickCoord, std::vector<std::pair<VoxelKey, VoxelData>>&& brick) {
-        std::vector<SurfaceVoxel> voxels(brick.size());
-        for (std::size_t i = 0; i < brick.size(); ++i) {
-          const auto& [k, v] = brick[i];
-          SurfaceVoxel& s = voxels[i];
-          s.key = k;
-          s.distance = v.distance;
-          s.weight = v.weight;
-          for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
-        }
-        bricks.add(voxels);
-      });
+  ExtractJournal* extract_journal =
+      journal && !hooks.scratch.empty() ? journal->extraction(extraction_signature(options, map.brick_level()), scratch)
+                                        : nullptr;
+  BrickExtraction bricks(scratch, root, map.brick_level(), options.extract, limit > 0 ? limit : std::size_t{1} << 30,
+                         extract_journal);
+  if (!bricks.all_added_before()) {
+    stats.regularize = regularize_bricks(
+        map, options.regularize, hooks.progress,
+        [&](BrickCoord coord, std::vector<std::pair<VoxelKey, VoxelData>>&& brick) {
+          std::vector<SurfaceVoxel> voxels(brick.size());
+          for (std::size_t i = 0; i < brick.size(); ++i) {
+            const auto& [k, v] = brick[i];
+            SurfaceVoxel& s = voxels[i];
+            s.key = k;
+            s.distance = v.distance;
+            s.weight = v.weight;
+            for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
+          }
+          bricks.add(coord.packed(), voxels);
+        },
+        [&](BrickCoord coord) { return bricks.added_before(coord.packed()); });
+    bricks.all_added();
+  }
   map.clear();  // release the field before the tetrahedralization
-  std::size_t survivors = 0;
   for (int l = 0; l <= kMaxLevel; ++l) {
     stats.voxels_fused[l] = stats.regularize.voxels_before[l];
     stats.voxels_regularized[l] = stats.regularize.voxels_after[l];
-    survivors += stats.regularize.voxels_after[l];
   }
   end_stage("regularize");
   stats.peak_rss_regularize_bytes = peak_rss_bytes();
+  const std::size_t survivors = bricks.size();
   if (survivors < 4) throw InputError("too few confident voxels to extract a surface (" + std::to_string(survivors) + ")");
   const bool too_big = limit > 0 && survivors * kDelaunayBytesPerVoxel > limit;
   const bool by_brick = options.extract.mode == "bricks" || (options.extract.mode == "auto" && too_big);

@@ -21,6 +21,8 @@
 
 namespace sf {
 
+class ExtractJournal;
+
 struct OctreeOptions {
   // Clip box "xmin,ymin,zmin,xmax,ymax,zmax" in world metres; empty: the data's bounding box.
   std::string bbox;
@@ -154,6 +156,15 @@ class FusionJournal {
   virtual void integrated(const IntegrationProgress& progress, BrickMap& map) = 0;
   // Integration stopped early (FusionHooks::stop): a checkpoint.
   virtual void interrupted(const IntegrationProgress& progress, BrickMap& map) = 0;
+  // The record of a brick extraction of the integrated field, its mailboxes in `scratch`, so
+  // that it resumes brick by brick (engine/extract/brick_extract.h). `signature` names the
+  // parameters that shape its result; a record of other parameters or of an earlier field is
+  // dropped (with the scratch files). nullptr: the journal keeps none.
+  virtual ExtractJournal* extraction(const std::string& signature, const std::filesystem::path& scratch) {
+    (void)signature;
+    (void)scratch;
+    return nullptr;
+  }
 };
 
 // Runs the fusion in the calling TBB arena and returns the mesh (empty if streamed to

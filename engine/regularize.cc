@@ -153,7 +153,7 @@ RegularizeStats regularize(BrickMap& map, const RegularizeOptions& options, cons
 // touches lies in X's closed box, i.e. in X or on the lower faces of its 7 upper neighbours. Levels
 // <= B sit on brick corners and are regularized first, all together (they are few).
 RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& options, const ProgressFn& progress,
-                                  const BrickSink& sink) {
+                                  const BrickSink& sink, const std::function<bool(BrickCoord)>& skip) {
   const int B = map.brick_level();
   const std::vector<Brick*> bricks = map.bricks();
   RegularizeStats stats;
@@ -202,6 +202,11 @@ RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& option
   std::size_t done = 0;
   tbb::parallel_for(std::size_t(0), bricks.size(), [&](std::size_t i) {
     const BrickCoord X = bricks[i]->coord;
+    if (skip && skip(X)) {
+      std::lock_guard lock(stats_mutex);
+      report(progress, "regularize", double(++done + 2), double(bricks.size()) + 2);
+      return;
+    }
     VoxelTable window = map.take_field(*bricks[i]);
     std::size_t before[kMaxLevel + 1] = {}, after[kMaxLevel + 1] = {};
     window.for_each([&](VoxelKey k, VoxelData& v) {

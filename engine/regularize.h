@@ -41,9 +41,10 @@ using BrickSink = std::function<void(BrickCoord brick, std::vector<std::pair<Vox
 // has to be in memory at once: each brick's field is read twice (once for its face voxels and
 // levels <= the brick level, once to regularize it) and handed to `sink` (called one brick at a
 // time, in no fixed order). Resident bricks are moved out of `map`, spilled ones read from their
-// tiles (which stay). Parallel in the calling arena.
+// tiles (which stay). Parallel in the calling arena. Bricks `skip` accepts are not handed to the
+// sink (a resumed job has them already) and are left out of the stats.
 RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& options, const ProgressFn& progress,
-                                  const BrickSink& sink);
+                                  const BrickSink& sink, const std::function<bool(BrickCoord)>& skip = nullptr);
 
 // Interpolates (distance, weight, colour) of the coarser level at voxel `key`'s position; false if a
 // required coarser voxel is missing. Exposed for tests.

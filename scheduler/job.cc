@@ -241,7 +241,10 @@ Job::Job(JobOptions options, std::string config, std::string input, std::string 
        "CREATE TABLE IF NOT EXISTS inputs(idx INTEGER PRIMARY KEY, name TEXT NOT NULL, size INTEGER NOT NULL,"
        "  hash TEXT NOT NULL);"
        "CREATE TABLE IF NOT EXISTS manifest(bx INTEGER, by INTEGER, bz INTEGER, generation INTEGER NOT NULL,"
-       "  bytes INTEGER NOT NULL, PRIMARY KEY(bx, by, bz));",
+       "  bytes INTEGER NOT NULL, PRIMARY KEY(bx, by, bz));"
+       "CREATE TABLE IF NOT EXISTS extract_done(pass TEXT NOT NULL, item INTEGER NOT NULL, PRIMARY KEY(pass, item));"
+       "CREATE TABLE IF NOT EXISTS extract_blob(box TEXT NOT NULL, dest INTEGER NOT NULL, src INTEGER NOT NULL,"
+       "  seq INTEGER NOT NULL, offset INTEGER NOT NULL, stored INTEGER NOT NULL, raw INTEGER NOT NULL);",
        where);
   store_ = std::make_unique<TileStore>(options_.dir / "tiles");
   } catch (...) {
@@ -250,6 +253,80 @@ Job::Job(JobOptions options, std::string config, std::string input, std::string 
     throw;
   }
   last_checkpoint_ = std::chrono::steady_clock::now();
+}
+
+// The extraction's record: SQLite rows committed in one transaction each (64-bit keys stored as
+// their two's-complement int64).
+class Job::Extraction : public ExtractJournal {
+ public:
+  Extraction(sqlite3* db, std::string where, double seconds, std::size_t kill_after)
+      : db_(db), where_(std::move(where)), seconds_(seconds), kill_after_(kill_after) {}
+  std::vector<std::pair<std::string, std::uint64_t>> finished() const override {
+    std::vector<std::pair<std::string, std::uint64_t>> out;
+    Statement s(db_, "SELECT pass, item FROM extract_done", where_);
+    while (s.step()) out.push_back({s.text(0), std::uint64_t(s.integer(1))});
+    return out;
+  }
+  std::vector<Record> blobs() const override {
+    std::vector<Record> out;
+    Statement s(db_, "SELECT box, dest, src, seq, offset, stored, raw FROM extract_blob ORDER BY rowid", where_);
+    while (s.step()) {
+      Record r;
+      r.box = s.text(0);
+      r.blob = {std::uint64_t(s.integer(1)), std::uint64_t(s.integer(2)), std::uint64_t(s.integer(3)),
+                std::uint64_t(s.integer(4)), std::uint32_t(s.integer(5)), std::uint32_t(s.integer(6))};
+      out.push_back(std::move(r));
+    }
+    return out;
+  }
+  void commit(const std::string& pass, const std::vector<std::uint64_t>& items,
+              const std::vector<Record>& blobs) override {
+    Transaction t(db_, where_);
+    Statement done(db_, "INSERT OR IGNORE INTO extract_done(pass, item) VALUES(?1, ?2)", where_);
+    for (std::uint64_t item : items) done.bind(1, pass).bind(2, std::int64_t(item)).run();
+    Statement blob(db_, "INSERT INTO extract_blob(box, dest, src, seq, offset, stored, raw) VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+                   where_);
+    for (const Record& r : blobs) {
+      blob.bind(1, r.box).bind(2, std::int64_t(r.blob.dest)).bind(3, std::int64_t(r.blob.src));
+      blob.bind(4, std::int64_t(r.blob.seq)).bind(5, std::int64_t(r.blob.offset)).bind(6, std::int64_t(r.blob.stored));
+      blob.bind(7, std::int64_t(r.blob.raw)).run();
+    }
+    t.commit();
+    if (kill_after_ > 0 && ++commits_ == kill_after_) ::kill(::getpid(), SIGKILL);
+  }
+  void forget(const std::vector<std::string>& boxes) override {
+    Transaction t(db_, where_);
+    Statement del(db_, "DELETE FROM extract_blob WHERE box = ?1", where_);
+    for (const std::string& b : boxes) del.bind(1, b).run();
+    t.commit();
+  }
+  double commit_seconds() const override { return seconds_; }
+
+ private:
+  sqlite3* db_;
+  std::string where_;
+  double seconds_;
+  std::size_t kill_after_, commits_ = 0;
+};
+
+ExtractJournal* Job::extraction(const std::string& signature, const std::filesystem::path& scratch) {
+  const std::string where = options_.dir.string();
+  // The record holds for this signature on this field: the last checkpoint's tiles.
+  const std::string full = signature + " field " + meta(db_, "max_generation", where) + "/" + meta(db_, "integrated", where);
+  if (meta(db_, "extract_signature", where) != full) {
+    Transaction t(db_, where);
+    exec(db_, "DELETE FROM extract_done; DELETE FROM extract_blob;", where);
+    set_meta(db_, "extract_signature", full, where);
+    t.commit();
+    std::error_code ec;
+    std::filesystem::remove_all(scratch, ec);
+  }
+  scratch_ = scratch;
+  // Commits at most every 30 s (the integration's checkpoint interval when shorter): a brick
+  // pass loses at most that much work.
+  extraction_ = std::make_unique<Extraction>(db_, where, std::min(options_.checkpoint_seconds, 30.0),
+                                             options_.kill_in_extraction);
+  return extraction_.get();
 }
 
 Job::~Job() {
@@ -416,8 +493,16 @@ void Job::interrupted(const IntegrationProgress& progress, BrickMap& map) {
 
 void Job::finished(const std::filesystem::path& mesh) {
   const std::string where = options_.dir.string();
+  Transaction t(db_, where);
   set_meta(db_, "stage", "done", where);
   set_meta(db_, "mesh", mesh.string(), where);
+  exec(db_, "DELETE FROM extract_done; DELETE FROM extract_blob; DELETE FROM meta WHERE key = 'extract_signature';",
+       where);
+  t.commit();
+  if (!scratch_.empty()) {
+    std::error_code ec;
+    std::filesystem::remove_all(scratch_, ec);
+  }
 }
 
 JobStatus Job::recorded(const std::filesystem::path& dir, std::string* config) {

@@ -5,7 +5,9 @@
 //                    list with each depth map's file size and content hash, the last committed
 //                    checkpoint (depth maps integrated, manifest brick -> tile generation), stage
 //   DIR/tiles/       brick tiles (storage/tile_file.h), b_X_Y_Z.GEN.tile
-//   DIR/scratch/     the brick extraction's mailboxes while it runs (storage/mailbox.h)
+//   DIR/scratch/     the brick extraction's mailboxes while it runs (storage/mailbox.h); the
+//                    journal records the bricks each pass finished and their blobs, so that an
+//                    interrupted extraction resumes brick by brick
 //   DIR/mesh.ply     the final mesh (also linked or copied to the requested output)
 //
 // A checkpoint is committed in one SQLite transaction after its tiles are written and fsynced;
@@ -21,6 +23,7 @@
 #include <vector>
 
 #include "engine/error.h"
+#include "engine/extract/brick_extract.h"
 #include "engine/fusion.h"
 #include "storage/tile_store.h"
 
@@ -44,6 +47,8 @@ struct JobOptions {
   std::size_t kill_after = 0;
   // Testing aid: the same, sending itself SIGTERM. 0 = never.
   std::size_t term_after = 0;
+  // Testing aid: SIGKILL right after the n-th commit of the extraction's progress. 0 = never.
+  std::size_t kill_in_extraction = 0;
   // `scalefuse add`: the inputs may extend the job's (its depth maps first, unchanged).
   bool allow_new_inputs = false;
   // fuse --follow: the input grows while the job runs (implies allow_new_inputs); recorded so
@@ -80,7 +85,9 @@ class Job : public FusionJournal {
   void tile_done(const IntegrationProgress& progress, BrickMap& map) override;
   void integrated(const IntegrationProgress& progress, BrickMap& map) override;
   void interrupted(const IntegrationProgress& progress, BrickMap& map) override;
-  // Records the finished mesh (already written to `mesh`).
+  ExtractJournal* extraction(const std::string& signature, const std::filesystem::path& scratch) override;
+  // Records the finished mesh (already written to `mesh`); the extraction's record and scratch
+  // files go.
   void finished(const std::filesystem::path& mesh);
 
   const std::filesystem::path& dir() const { return options_.dir; }
@@ -104,6 +111,9 @@ class Job : public FusionJournal {
   std::size_t since_checkpoint_ = 0, checkpoints_ = 0;
   IntegrationProgress progress_;  // as of the last step
   std::chrono::steady_clock::time_point last_checkpoint_;
+  class Extraction;
+  std::unique_ptr<Extraction> extraction_;
+  std::filesystem::path scratch_;
 };
 
 // "1.5G", "800M", "64K", "1000000" -> bytes. Throws InputError naming `what`.

@@ -1,6 +1,7 @@
 #include "storage/mailbox.h"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <lz4.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -24,10 +25,62 @@ Mailbox::Mailbox(std::filesystem::path dir, std::string name) {
   if (fd_ < 0) throw io_error(path_, "cannot create scratch file");
 }
 
+Mailbox::Mailbox(std::filesystem::path dir, std::string name, std::vector<Blob> committed) {
+  path_ = dir / (name + ".box");
+  fd_ = ::open(path_.c_str(), O_RDWR | O_CLOEXEC);
+  if (fd_ < 0) throw io_error(path_, "cannot open the scratch file of the job's extraction");
+  struct stat st;
+  if (::fstat(fd_, &st) != 0) throw io_error(path_, "cannot read the scratch file's size");
+  end_ = std::uint64_t(st.st_size);
+  std::uint64_t next = 0;
+  for (const Blob& b : committed) {
+    if (b.offset + b.stored > end_) {
+      ::close(fd_);
+      fd_ = -1;
+      throw std::runtime_error(path_.string() + ": scratch file shorter than the job's journal says (" +
+                               std::to_string(end_) + " bytes)");
+    }
+    next = std::max(next, b.seq + 1);
+    stored_ += b.stored;
+    raw_ += b.raw;
+  }
+  seq_ = next;
+  index_ = std::move(committed);
+  fresh_ = index_.size();
+}
+
 Mailbox::~Mailbox() {
   if (fd_ >= 0) ::close(fd_);
+  if (!keep_) {
+    std::error_code ec;
+    std::filesystem::remove(path_, ec);
+  }
+}
+
+void Mailbox::remove_file() {
+  keep_ = false;
   std::error_code ec;
   std::filesystem::remove(path_, ec);
+}
+
+std::vector<Mailbox::Blob> Mailbox::sync_blobs_from(const std::vector<std::uint64_t>& srcs) const {
+  if (::fdatasync(fd_) != 0) throw io_error(path_, "cannot sync scratch data (disk full?)");
+  std::lock_guard lock(mutex_);
+  std::vector<Blob> out;
+  if (sealed_.load()) throw std::logic_error("Mailbox: journal sync after collect");
+  for (std::size_t i = fresh_; i < index_.size(); ++i)
+    if (std::binary_search(srcs.begin(), srcs.end(), index_[i].src)) out.push_back(index_[i]);
+  return out;
+}
+
+std::uint64_t Mailbox::raw_bytes(std::uint64_t dest) const {
+  seal();
+  std::uint64_t total = 0;
+  for (auto e = std::lower_bound(index_.begin(), index_.end(), dest,
+                                 [](const Entry& x, std::uint64_t d) { return x.dest < d; });
+       e != index_.end() && e->dest == dest; ++e)
+    total += e->raw;
+  return total;
 }
 
 void Mailbox::post_bytes(std::uint64_t dest, std::uint64_t src, const void* data, std::size_t bytes) {

@@ -4,8 +4,10 @@
 // LZ4-compressed (by the posting thread) and appended to one file, so memory holds only a small
 // index entry per blob, and each record is written once and read once.
 //
-// Not a durable format: the files live for one run of a stage, under the job's scratch folder,
-// and are deleted with the mailbox.
+// The file alone is not durable: the index lives in memory. A job's brick extraction
+// (engine/extract/brick_extract.h) syncs the file and commits the index entries (blobs) of
+// finished bricks to the job's journal; a resumed run reopens the file with the committed blobs
+// (blobs written after the last commit stay in the file, unread, and new ones go after them).
 #include <atomic>
 #include <cstring>
 #include <cstdint>
@@ -20,9 +22,22 @@ namespace sf {
 
 class Mailbox {
  public:
-  // The file is `dir`/`name`.box (dir is created).
+  // Where a blob is: posted to `dest` by `src`, the seq-th post, `stored` bytes at `offset`.
+  struct Blob {
+    std::uint64_t dest, src, seq, offset;
+    std::uint32_t stored, raw;
+  };
+
+  // A new, empty mailbox: the file is `dir`/`name`.box (dir is created, the file truncated).
   Mailbox(std::filesystem::path dir, std::string name);
-  ~Mailbox();  // deletes the files
+  // The mailbox a previous run left, holding the blobs `committed` (a journal's record of it).
+  // Throws if the file is missing or shorter than they say.
+  Mailbox(std::filesystem::path dir, std::string name, std::vector<Blob> committed);
+  ~Mailbox();  // deletes the file unless keep_file() was called
+  // The file outlives this object (a journal refers to it); remove_file() deletes it.
+  void keep_file() { keep_ = true; }
+  void remove_file();
+  const std::filesystem::path& path() const { return path_; }
   Mailbox(const Mailbox&) = delete;
   Mailbox& operator=(const Mailbox&) = delete;
 
@@ -47,19 +62,24 @@ class Mailbox {
   }
   // Destinations that received anything, ascending.
   std::vector<std::uint64_t> destinations() const;
+  // Uncompressed bytes posted to `dest` (after the posting pass).
+  std::uint64_t raw_bytes(std::uint64_t dest) const;
+
+  // For a journal: flushes the file to disk (fdatasync), then lists the blobs posted by `srcs`
+  // (ascending) since this object was made.
+  std::vector<Blob> sync_blobs_from(const std::vector<std::uint64_t>& srcs) const;
 
   std::uint64_t bytes_stored() const { return stored_.load(); }  // compressed, on disk
   std::uint64_t bytes_raw() const { return raw_.load(); }
 
  private:
-  struct Entry {
-    std::uint64_t dest, src, seq, offset;
-    std::uint32_t stored, raw;
-  };
+  using Entry = Blob;
   void seal() const;  // sorts the index (first collect after posting)
 
   std::filesystem::path path_;
   int fd_ = -1;
+  bool keep_ = false;
+  std::size_t fresh_ = 0;  // index_[fresh_...] were posted by this object (until sealed)
   std::uint64_t end_ = 0;  // file size (guarded by mutex_)
   std::atomic<std::uint64_t> seq_{0}, stored_{0}, raw_{0};
   mutable std::mutex mutex_;

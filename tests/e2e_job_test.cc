@@ -137,6 +137,58 @@ TEST(Job, KilledAtSeveralPointsAndResumedGivesTheSameMesh) {
   }
 }
 
+// Issue 4: a killed brick-by-brick extraction resumes brick by brick. The process kills itself
+// right after the n-th commit of the extraction's progress (one per finished brick here), in
+// regularization, in the windows' pass and in the passes after it; each resumed run skips what
+// the killed one finished and writes the same bytes. A changed extraction parameter drops the
+// record instead of reusing it.
+TEST(Job, KilledDuringBrickExtractionResumesBrickByBrick) {
+  const fs::path dir = test::scratch_dir("job-kill-extract");
+  const fs::path ref = dir / "ref.ply";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
+  const std::string expected = bytes_of(ref);
+  const std::string commit_each = " --extract bricks --checkpoint-seconds 0.000001 ";
+  for (int kill_after : {60, 380, 1000}) {
+    SCOPED_TRACE("killed after commit " + std::to_string(kill_after));
+    const fs::path out = dir / numbered("x", kill_after, ".ply");
+    const fs::path job = dir / numbered("x", kill_after, ".job");
+    const CliRun killed = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() +
+                                        " -q" + commit_each + kScene,
+                                    "SCALEFUSE_TEST_KILL_IN_EXTRACTION=" + std::to_string(kill_after));
+    ASSERT_NE(killed.code, 0) << "the process was to kill itself";
+    EXPECT_FALSE(fs::exists(out));
+    EXPECT_TRUE(fs::exists(job / "scratch"));
+    const CliRun resumed = scalefuse("resume " + job.string() + " -q --stats " + out.string() + ".json");
+    ASSERT_EQ(resumed.code, 0) << resumed.output;
+    EXPECT_TRUE(bytes_of(out) == expected);
+    EXPECT_FALSE(fs::exists(job / "scratch")) << "a finished job keeps no scratch files";
+    const auto stats = nlohmann::json::parse(bytes_of(out.string() + ".json"));
+    EXPECT_GT(stats["extract"]["resumed_items"].get<int>(), 40) << "bricks finished before the kill were skipped";
+    // Counts are summed from every brick's record, whichever run did it.
+    EXPECT_EQ(stats["extract"]["windows"].get<int>(), 149);
+    if (kill_after > 200) {
+      EXPECT_EQ(stats["regularize"]["blended"], 0) << "regularization was complete: not run again";
+    }
+  }
+  // Killed in the windows' pass, then fused again with another snapping distance: the record
+  // belongs to other parameters and is dropped, the result is the new parameters' mesh.
+  const fs::path fresh = dir / "nosnap.ply", again = dir / "again.ply", job = dir / "again.job";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + fresh.string() + " -q --set extract.snap_fraction=0 " + kScene)
+                .code,
+            0);
+  ASSERT_NE(scalefuse("fuse " + bunny().string() + " -o " + again.string() + " --job " + job.string() + " -q" +
+                          commit_each + kScene,
+                      "SCALEFUSE_TEST_KILL_IN_EXTRACTION=380")
+                .code,
+            0);
+  const CliRun changed = scalefuse("fuse " + bunny().string() + " -o " + again.string() + " --job " + job.string() +
+                                   " -q --set extract.snap_fraction=0 --stats " + again.string() + ".json" + commit_each + kScene);
+  ASSERT_EQ(changed.code, 0) << changed.output;
+  EXPECT_TRUE(bytes_of(again) == bytes_of(fresh));
+  EXPECT_FALSE(bytes_of(again) == expected);
+  EXPECT_EQ(nlohmann::json::parse(bytes_of(again.string() + ".json"))["extract"]["resumed_items"], 0);
+}
+
 TEST(Job, SigtermCheckpointsExitsAndResumesToTheSameMesh) {
   const fs::path dir = test::scratch_dir("job-term");
   const fs::path ref = dir / "ref.ply", out = dir / "t.ply", job = dir / "t.job";

@@ -423,7 +423,8 @@ TEST(ExtractSurface, WindowsSplitToFitTheMemoryBudgetGiveTheGlobalMesh) {
     SCOPED_TRACE("brick level " + std::to_string(brick_level));
     const ScratchFolder scratch("scalefuse-split-test");
     BrickExtraction bricks(scratch.path(), root, brick_level, o, std::size_t{4} << 20);  // 3,200 points a window
-    bricks.add(voxels);
+    bricks.add(0, voxels);
+    bricks.all_added();
     MeshCollector mesh;
     ExtractStats st;
     tbb::task_arena arena(2);

@@ -11,7 +11,11 @@
 #include <cmath>
 #include <limits>
 #include <cstring>
+#include <chrono>
+#include <functional>
 #include <list>
+#include <map>
+#include <set>
 #include <mutex>
 #include <numeric>
 #include <sstream>
@@ -90,6 +94,19 @@ struct BrickVoxels {
 // bytes per point as measured on the global path, plus the window's own lists).
 constexpr std::size_t kWindowBytesPerPoint = 650;
 
+// Per-item counters of a pass, summed at the end (they go through a mailbox, so that a resumed
+// run counts the items an earlier run did).
+struct Tally {
+  std::uint64_t v[8];
+};
+
+// Bit i of v -> bit i of the result, for every third bit (the inverse of spread_bits).
+std::uint32_t compact_bits(std::uint64_t v) {
+  std::uint32_t out = 0;
+  for (int i = 0; i < 21; ++i) out |= std::uint32_t((v >> (3 * i)) & 1) << i;
+  return out;
+}
+
 struct BrickInfo {
   std::uint64_t code;  // Morton code of the brick coordinates = its place in the output
   std::uint32_t x, y, z;
@@ -109,9 +126,24 @@ struct BrickExtraction::Impl {
   std::mutex window_mutex;
   std::condition_variable window_freed;
   std::size_t window_bytes = 0;
-  std::atomic<int> finest{0};
-  std::atomic<std::size_t> added{0};
-  std::unique_ptr<Mailbox> incoming;
+
+  // Progress and the mailboxes, durable through the journal when there is one.
+  ExtractJournal* journal = nullptr;
+  std::map<std::string, std::vector<Mailbox::Blob>> committed;    // by box: an earlier run's
+  std::map<std::string, std::set<std::uint64_t>> finished_before;  // by pass: items an earlier run did
+  std::mutex boxes_mutex;
+  std::map<std::string, std::unique_ptr<Mailbox>> boxes;
+  // A pass's items finished since its last commit.
+  struct Pass {
+    Pass(std::string pass, std::vector<std::string> boxes) : name(std::move(pass)), outputs(std::move(boxes)) {}
+    std::string name;
+    std::vector<std::string> outputs;
+    std::mutex mutex;
+    std::vector<std::uint64_t> finished;
+    std::chrono::steady_clock::time_point last = std::chrono::steady_clock::now();
+  };
+  Pass adding{"regularize", {"incoming", "tally_add"}};
+  mutable std::atomic<std::size_t> resumed{0};  // items skipped: an earlier run finished them
 
   // Set by prepare():
   int G = 0;                      // lattice level: max(finest, B)
@@ -119,7 +151,6 @@ struct BrickExtraction::Impl {
   std::vector<BrickInfo> bricks;  // bricks with voxels, by code
   std::uint32_t levels = 0;       // bit l: some voxel of level l
   Occupancy occ;
-  std::unique_ptr<Mailbox> survivors;
 
   // The decoded-brick cache of the windows (least recently used out).
   std::mutex cache_mutex;
@@ -139,10 +170,107 @@ struct BrickExtraction::Impl {
   }
   std::shared_ptr<const BrickVoxels> load(std::uint64_t code);
   void prepare(const ProgressFn& progress, ExtractStats* st);
+
+  Mailbox& box(const std::string& name);
+  void forget(const std::vector<std::string>& names);
+  bool done_before(const std::string& pass, std::uint64_t item) const {
+    const auto it = finished_before.find(pass);
+    return it != finished_before.end() && (it->second.count(item) || it->second.count(ExtractJournal::kWholePass));
+  }
+  void commit(Pass& p, bool whole);  // p.mutex held
+  void finish(Pass& p, std::uint64_t item);
+  // Runs fn(k) for each items[k] an earlier run did not finish, in parallel, committing as it
+  // goes; `stage` (if not null) reports progress per item.
+  void run_pass(Pass& p, const std::vector<std::uint64_t>& items, const std::function<void(std::size_t)>& fn,
+                const ProgressFn& progress, const char* stage);
+  // The sum of a pass's tallies (box "tally_<pass>"), or their bitwise or.
+  Tally sum(const std::string& pass, bool bitwise_or = false) {
+    Tally t{};
+    for (const Tally& x : box("tally_" + pass).collect<Tally>(0))
+      for (int i = 0; i < 8; ++i) t.v[i] = bitwise_or ? t.v[i] | x.v[i] : t.v[i] + x.v[i];
+    return t;
+  }
 };
 
+Mailbox& BrickExtraction::Impl::box(const std::string& name) {
+  std::lock_guard lock(boxes_mutex);
+  std::unique_ptr<Mailbox>& b = boxes[name];
+  if (!b) {
+    const auto it = committed.find(name);
+    b = it != committed.end() ? std::make_unique<Mailbox>(scratch, name, it->second)
+                              : std::make_unique<Mailbox>(scratch, name);
+    if (journal) b->keep_file();
+  }
+  return *b;
+}
+
+void BrickExtraction::Impl::forget(const std::vector<std::string>& names) {
+  if (journal) journal->forget(names);
+  std::lock_guard lock(boxes_mutex);
+  for (const std::string& name : names) {
+    const auto it = boxes.find(name);
+    if (it != boxes.end()) {
+      it->second->remove_file();
+      boxes.erase(it);
+    } else {
+      std::error_code ec;
+      std::filesystem::remove(scratch / (name + ".box"), ec);
+    }
+    committed.erase(name);
+  }
+}
+
+void BrickExtraction::Impl::commit(Pass& p, bool whole) {
+  p.last = std::chrono::steady_clock::now();
+  if (!journal) {
+    p.finished.clear();
+    return;
+  }
+  std::sort(p.finished.begin(), p.finished.end());
+  std::vector<ExtractJournal::Record> records;
+  for (const std::string& name : p.outputs)
+    for (const Mailbox::Blob& b : box(name).sync_blobs_from(p.finished)) records.push_back({name, b});
+  if (whole) p.finished.push_back(ExtractJournal::kWholePass);
+  journal->commit(p.name, p.finished, records);
+  p.finished.clear();
+}
+
+void BrickExtraction::Impl::finish(Pass& p, std::uint64_t item) {
+  std::lock_guard lock(p.mutex);
+  p.finished.push_back(item);
+  if (journal &&
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - p.last).count() >= journal->commit_seconds())
+    commit(p, false);
+}
+
+void BrickExtraction::Impl::run_pass(Pass& p, const std::vector<std::uint64_t>& items,
+                                     const std::function<void(std::size_t)>& fn, const ProgressFn& progress,
+                                     const char* stage) {
+  if (stage) report(progress, stage, 0, double(items.size()));
+  if (done_before(p.name, ExtractJournal::kWholePass)) {
+    resumed += items.size();
+    if (stage) report(progress, stage, double(items.size()), double(items.size()));
+    return;
+  }
+  for (const std::string& name : p.outputs) box(name);  // made before the threads post to them
+  std::atomic<std::size_t> done{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, items.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t k = r.begin(); k != r.end(); ++k) {
+      if (!done_before(p.name, items[k])) {
+        fn(k);
+        finish(p, items[k]);
+      } else {
+        ++resumed;
+      }
+      if (stage) report(progress, stage, double(++done), double(items.size()));
+    }
+  });
+  std::lock_guard lock(p.mutex);
+  commit(p, true);
+}
+
 BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level,
-                                 const ExtractOptions& options, std::size_t memory_budget)
+                                 const ExtractOptions& options, std::size_t memory_budget, ExtractJournal* journal)
     : impl_(std::make_unique<Impl>()) {
   options.check();
   if (brick_level < 0 || brick_level > kMaxLevel)
@@ -154,20 +282,40 @@ BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& 
   impl_->options = options;
   impl_->cache_bytes = memory_budget / 4;
   impl_->window_budget = memory_budget / 2;
-  impl_->incoming = std::make_unique<Mailbox>(impl_->scratch, "incoming");
+  impl_->journal = journal;
+  if (journal) {
+    for (const auto& [pass, item] : journal->finished()) impl_->finished_before[pass].insert(item);
+    for (const ExtractJournal::Record& r : journal->blobs()) impl_->committed[r.box].push_back(r.blob);
+  }
 }
 
 BrickExtraction::~BrickExtraction() {
   const std::filesystem::path scratch = impl_->scratch;
-  impl_.reset();  // the mailboxes delete their files
+  impl_.reset();  // the mailboxes delete their files (unless a journal refers to them)
   std::error_code ec;
   std::filesystem::remove(scratch, ec);  // only if empty: the folder may be the caller's
 }
 
-void BrickExtraction::add(const std::vector<SurfaceVoxel>& voxels) {
+bool BrickExtraction::added_before(std::uint64_t source) const {
+  const bool done = impl_->done_before("regularize", source);
+  if (done) ++impl_->resumed;
+  return done;
+}
+bool BrickExtraction::all_added_before() const {
+  return impl_->done_before("regularize", ExtractJournal::kWholePass);
+}
+void BrickExtraction::all_added() {
+  std::lock_guard lock(impl_->adding.mutex);
+  impl_->box("incoming");  // even if nothing was added
+  impl_->box("tally_add");
+  impl_->commit(impl_->adding, true);
+}
+std::size_t BrickExtraction::size() const { return impl_->sum("add").v[1]; }
+
+void BrickExtraction::add(std::uint64_t source, const std::vector<SurfaceVoxel>& voxels) {
   Impl& m = *impl_;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> order(voxels.size());
-  int finest = 0;
+  std::uint32_t levels = 0;
   for (std::size_t i = 0; i < voxels.size(); ++i) {
     const VoxelKey k = voxels[i].key;
     if (!valid_voxel(k.level(), k.x(), k.y(), k.z()) || (k.bits >> 62) != 0) {
@@ -175,7 +323,7 @@ void BrickExtraction::add(const std::vector<SurfaceVoxel>& voxels) {
       s << "extract: voxel with an invalid key (bits 0x" << std::hex << k.bits << ")";
       throw InputError(s.str());
     }
-    finest = std::max(finest, k.level());
+    levels |= 1u << k.level();
     order[i] = {m.brick_code_of_key(k), std::uint32_t(i)};
   }
   std::sort(order.begin(), order.end());
@@ -184,19 +332,18 @@ void BrickExtraction::add(const std::vector<SurfaceVoxel>& voxels) {
     const std::uint64_t code = order[i].first;
     group.clear();
     for (; i < order.size() && order[i].first == code; ++i) group.push_back(voxels[order[i].second]);
-    m.incoming->post(code, 0, group);
+    m.box("incoming").post(code, source, group);
   }
-  int seen = m.finest.load();
-  while (finest > seen && !m.finest.compare_exchange_weak(seen, finest)) {
-  }
-  m.added += voxels.size();
+  m.box("tally_add").post(0, source, std::vector<Tally>{{{levels, voxels.size()}}});
+  m.finish(m.adding, source);
 }
 
 std::vector<SurfaceVoxel> BrickExtraction::voxels() const {
   std::vector<SurfaceVoxel> all;
-  all.reserve(impl_->added.load());
-  for (std::uint64_t code : impl_->incoming->destinations()) {
-    const std::vector<SurfaceVoxel> b = impl_->incoming->collect<SurfaceVoxel>(code);
+  all.reserve(size());
+  Mailbox& incoming = impl_->box("incoming");
+  for (std::uint64_t code : incoming.destinations()) {
+    const std::vector<SurfaceVoxel> b = incoming.collect<SurfaceVoxel>(code);
     all.insert(all.end(), b.begin(), b.end());
   }
   return all;
@@ -212,7 +359,7 @@ std::shared_ptr<const BrickVoxels> BrickExtraction::Impl::load(std::uint64_t cod
     }
   }
   auto b = std::make_shared<BrickVoxels>();
-  b->voxels = survivors->collect<SurfaceVoxel>(code);
+  b->voxels = box("survivors").collect<SurfaceVoxel>(code);
   b->points.resize(b->voxels.size());
   b->by_cell.resize(b->voxels.size());
   for (std::size_t i = 0; i < b->voxels.size(); ++i) {
@@ -235,18 +382,17 @@ std::shared_ptr<const BrickVoxels> BrickExtraction::Impl::load(std::uint64_t cod
 
 // Pass 0: each brick's voxels sorted and checked, coarser twins dropped, then indexed.
 void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st) {
-  G = std::max(finest.load(), B);
+  int finest = 0;
+  for (std::uint64_t bits = sum("add", true).v[0]; bits >> (finest + 1) != 0;) ++finest;
+  G = std::max(finest, B);
   side = std::int64_t{1} << G;
   brick_side = std::int64_t{1} << (G - B);
   occ.side = std::max<std::int64_t>(1, brick_side / 8);
-  survivors = std::make_unique<Mailbox>(scratch, "survivors");
-  const std::vector<std::uint64_t> codes = incoming->destinations();
-  bricks.resize(codes.size());
-  std::vector<std::vector<std::uint64_t>> cells(codes.size());
-  std::atomic<std::size_t> kept{0}, dropped{0}, done{0};
-  std::atomic<std::uint32_t> level_bits{0};
-  tbb::parallel_for(std::size_t(0), codes.size(), [&](std::size_t bi) {
-    std::vector<SurfaceVoxel> v = incoming->collect<SurfaceVoxel>(codes[bi]);
+  Pass pass{"prepare", {"survivors", "occupancy", "tally_prepare"}};
+  Mailbox& incoming = box("incoming");
+  const std::vector<std::uint64_t> codes = incoming.destinations();
+  run_pass(pass, codes, [&](std::size_t bi) {
+    std::vector<SurfaceVoxel> v = incoming.collect<SurfaceVoxel>(codes[bi]);
     std::sort(v.begin(), v.end(), [](const SurfaceVoxel& a, const SurfaceVoxel& b) { return a.key < b.key; });
     for (std::size_t i = 0; i < v.size(); ++i) {
       const auto fail = [&](const std::string& what) {
@@ -271,52 +417,43 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
     }
     std::vector<SurfaceVoxel> out;
     out.reserve(v.size());
-    std::uint32_t bits = 0;
-    std::vector<std::uint64_t>& c = cells[bi];
+    std::uint64_t bits = 0;
+    std::vector<std::uint64_t> cells;
     for (std::size_t i = 0; i < v.size(); ++i) {
       if (drop[i]) continue;
       out.push_back(v[i]);
       bits |= 1u << v[i].key.level();
       const LatticePoint p = lattice(v[i].key);
-      c.push_back(Occupancy::pack(p[0] / occ.side, p[1] / occ.side, p[2] / occ.side));
+      cells.push_back(Occupancy::pack(p[0] / occ.side, p[1] / occ.side, p[2] / occ.side));
     }
-    level_bits.fetch_or(bits);
-    std::sort(c.begin(), c.end());
-    c.erase(std::unique(c.begin(), c.end()), c.end());
-    c.shrink_to_fit();  // at most 512 cells: all bricks' lists live until the merge
-    kept += out.size();
-    dropped += v.size() - out.size();
-    const VoxelKey first = out.front().key;
-    const int s = G - first.level();
-    const std::int64_t last = (std::int64_t{1} << B) - 1;
-    const auto brick_axis = [&](std::uint32_t coord) {
-      return std::uint32_t(std::min<std::int64_t>((std::int64_t(coord) << s) / brick_side, last));
-    };
-    bricks[bi] = {codes[bi], brick_axis(first.x()), brick_axis(first.y()), brick_axis(first.z())};
-    survivors->post(codes[bi], codes[bi], out);
-    report(progress, "prepare", double(++done), double(codes.size()));
-  });
-  std::size_t total = 0;
-  for (const auto& c : cells) total += c.size();
-  occ.cells.reserve(total);
-  for (auto& c : cells) {
-    occ.cells.insert(occ.cells.end(), c.begin(), c.end());
-    std::vector<std::uint64_t>().swap(c);
-  }
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());  // at most 512
+    box("survivors").post(codes[bi], codes[bi], out);
+    box("occupancy").post(0, codes[bi], cells);
+    box("tally_prepare").post(0, codes[bi], std::vector<Tally>{{{bits, out.size(), v.size() - out.size(), codes[bi]}}});
+  }, progress, "prepare");
+  forget({"incoming"});
+  // The bricks, from the tallies (they outlive the survivors, which pass 1 consumes).
+  std::vector<std::uint64_t> codes_kept;
+  for (const Tally& t : box("tally_prepare").collect<Tally>(0)) codes_kept.push_back(t.v[3]);
+  std::sort(codes_kept.begin(), codes_kept.end());
+  for (std::uint64_t code : codes_kept)
+    bricks.push_back({code, compact_bits(code), compact_bits(code >> 1), compact_bits(code >> 2)});
+  occ.cells = box("occupancy").collect<std::uint64_t>(0);
   tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
   occ.cells.erase(std::unique(occ.cells.begin(), occ.cells.end()), occ.cells.end());
-  incoming.reset();
-  levels = level_bits.load();
-  st->voxels = kept.load();
-  st->coincident_voxels = dropped.load();
+  occ.cells.shrink_to_fit();
+  const Tally levels_seen = sum("prepare", true), counts = sum("prepare");
+  levels = std::uint32_t(levels_seen.v[0]);
+  st->voxels = counts.v[1];
+  st->coincident_voxels = counts.v[2];
 }
 
 void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractStats* stats) {
   Impl& m = *impl_;
   ExtractStats st;
   st.by_brick = true;
-  if (m.added.load() < 4)
-    throw InputError("too few confident voxels to extract a surface (" + std::to_string(m.added.load()) + ")");
+  if (size() < 4) throw InputError("too few confident voxels to extract a surface (" + std::to_string(size()) + ")");
   m.prepare(progress, &st);
   const int n = m.options.neighbourhood_n;
   const double snap_fraction = m.options.snap_fraction;
@@ -325,16 +462,17 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
   const auto brick_axis_of = [&](std::int64_t p) { return std::min<std::int64_t>(p / brick_side, last_brick); };
 
   // --- Pass 1: windows -------------------------------------------------------------------------
-  Mailbox piece_voxels(m.scratch, "piece_voxels"), piece_cells(m.scratch, "piece_cells"), offers(m.scratch, "offers");
+  Impl::Pass windows_pass{"tetrahedralize", {"piece_voxels", "piece_cells", "offers", "tally_windows"}};
+  Mailbox &piece_voxels = m.box("piece_voxels"), &piece_cells = m.box("piece_cells"), &offers = m.box("offers");
   struct Counters {
-    std::size_t tetrahedra = 0, kept = 0, windows = 0, points = 0, regrown = 0, split = 0, rejected = 0;
+    std::uint64_t tetrahedra, kept, windows, points, regrown, split, rejected, pad;
   };
-  tbb::enumerable_thread_specific<Counters> counters;
-  std::atomic<std::size_t> done{0};
-  report(progress, "tetrahedralize", 0, double(nb));
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nb, 1), [&](const tbb::blocked_range<std::size_t>& range) {
-    Counters& count = counters.local();
-    for (std::size_t bi = range.begin(); bi != range.end(); ++bi) {
+  static_assert(sizeof(Counters) == sizeof(Tally));
+  std::vector<std::uint64_t> codes(nb);
+  for (std::size_t i = 0; i < nb; ++i) codes[i] = m.bricks[i].code;
+  m.run_pass(windows_pass, codes, [&](std::size_t bi) {
+    Counters count{};
+    {
       const BrickInfo& X = m.bricks[bi];
       // Bricks held while X's windows are built (the cache may drop them meanwhile).
       std::unordered_map<std::uint64_t, std::shared_ptr<const BrickVoxels>> held;
@@ -540,7 +678,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         }
         const bool whole = ext.inner[0][0] == 0 && ext.inner[0][1] == 0 && ext.inner[0][2] == 0 &&
                            ext.inner[1][0] == side && ext.inner[1][1] == side && ext.inner[1][2] == side;
-        Counters mine;
+        Counters mine{};
         std::vector<Tet> cells;
         bool certified = true;
         {
@@ -677,17 +815,22 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
           i = j;
         }
       }
-      report(progress, "tetrahedralize", double(++done), double(nb));
+      Tally t;
+      std::memcpy(&t, &count, sizeof(t));
+      m.box("tally_windows").post(0, X.code, std::vector<Tally>{t});
     }
-  });
-  for (const Counters& c : counters) {
-    st.tetrahedra += c.tetrahedra;
-    st.kept_tetrahedra += c.kept;
-    st.windows += c.windows;
-    st.window_points += c.points;
-    st.windows_regrown += c.regrown;
-    st.windows_split += c.split;
-    st.window_cells_rejected += c.rejected;
+  }, progress, "tetrahedralize");
+  {
+    Counters c;
+    const Tally t = m.sum("windows");
+    std::memcpy(&c, &t, sizeof(c));
+    st.tetrahedra = c.tetrahedra;
+    st.kept_tetrahedra = c.kept;
+    st.windows = c.windows;
+    st.window_points = c.points;
+    st.windows_regrown = c.regrown;
+    st.windows_split = c.split;
+    st.window_cells_rejected = c.rejected;
   }
   {
     std::lock_guard lock(m.cache_mutex);
@@ -695,16 +838,16 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
     m.cached.clear();
     m.cached_bytes = 0;
   }
-  m.survivors.reset();
+  m.forget({"survivors", "occupancy"});
 
   // --- Pass 2: snaps ---------------------------------------------------------------------------
   constexpr double kStages = 5;  // "extract" steps: snap, march, number, faces, write
   report(progress, "extract", 0, kStages);
-  Mailbox snaps(m.scratch, "snaps");
-  std::atomic<std::size_t> snapped{0};
+  Impl::Pass snap_pass{"snap", {"snaps", "tally_snap"}};
+  Mailbox& snaps = m.box("snaps");
   {
     const std::vector<std::uint64_t> dests = offers.destinations();
-    tbb::parallel_for(std::size_t(0), dests.size(), [&](std::size_t k) {
+    m.run_pass(snap_pass, dests, [&](std::size_t k) {
       std::vector<SnapOffer> o = offers.collect<SnapOffer>(dests[k]);
       std::sort(o.begin(), o.end(), [](const SnapOffer& p, const SnapOffer& q) {
         return p.target != q.target ? p.target < q.target
@@ -724,18 +867,20 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         s.scale = o[i].scale;
         decided.push_back(s);
       }
-      snapped += decided.size();
       snaps.post(dests[k], dests[k], decided);
-    });
+      m.box("tally_snap").post(0, dests[k], std::vector<Tally>{{{decided.size()}}});
+    }, progress, nullptr);
   }
-  st.snapped_voxels = snapped.load();
+  m.forget({"offers"});
+  st.snapped_voxels = m.sum("snap").v[0];
 
   // --- Pass 3: march ---------------------------------------------------------------------------
   report(progress, "extract", 1, kStages);
-  Mailbox requests(m.scratch, "requests"), piece_faces(m.scratch, "piece_faces");
+  Impl::Pass march_pass{"march", {"requests", "piece_faces"}};
+  Mailbox &requests = m.box("requests"), &piece_faces = m.box("piece_faces");
   {
     const std::vector<std::uint64_t> pieces = piece_cells.destinations();
-    tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t k) {
+    m.run_pass(march_pass, pieces, [&](std::size_t k) {
       const std::uint64_t X = pieces[k];
       const std::vector<SurfaceVoxel> pv = piece_voxels.collect<SurfaceVoxel>(X);
       const std::vector<Tet> cells = piece_cells.collect<Tet>(X);
@@ -837,16 +982,17 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         faces[f].zero = zero[f];
       }
       piece_faces.post(X, X, faces);
-    });
+    }, progress, nullptr);
   }
+  m.forget({"piece_voxels", "piece_cells", "snaps"});
 
   // --- Pass 4: number each home brick's vertices -------------------------------------------------
   report(progress, "extract", 2, kStages);
-  Mailbox vertices(m.scratch, "vertices"), ranks(m.scratch, "ranks");
-  std::vector<std::uint64_t> home_count(nb, 0);
+  Impl::Pass number_pass{"number", {"vertices", "ranks"}};
+  Mailbox &vertices = m.box("vertices"), &ranks = m.box("ranks");
   {
     const std::vector<std::uint64_t> homes = requests.destinations();
-    tbb::parallel_for(std::size_t(0), homes.size(), [&](std::size_t k) {
+    m.run_pass(number_pass, homes, [&](std::size_t k) {
       const std::uint64_t H = homes[k];
       const std::ptrdiff_t h = m.ordinal(H);
       if (h < 0) throw std::logic_error("extract: a vertex's home brick holds no voxel");
@@ -876,7 +1022,6 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         }
         answers[i] = {x.src, Rank{x.local, std::uint32_t(h), std::uint32_t(numbered.size() - 1)}};
       }
-      home_count[std::size_t(h)] = numbered.size();
       vertices.post(H, H, numbered);
       std::stable_sort(answers.begin(), answers.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
       std::vector<Rank> batch;
@@ -887,20 +1032,22 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         ranks.post(answers[i].first, H, batch);
         i = j;
       }
-    });
+    }, progress, nullptr);
   }
+  m.forget({"requests"});
   std::vector<std::uint64_t> base(nb + 1, 0);
-  for (std::size_t i = 0; i < nb; ++i) base[i + 1] = base[i] + home_count[i];
+  for (std::size_t i = 0; i < nb; ++i) base[i + 1] = base[i] + vertices.raw_bytes(m.bricks[i].code) / sizeof(PlyVertex);
   const std::uint64_t total_vertices = base[nb];
   if (total_vertices > std::uint64_t(std::numeric_limits<std::int32_t>::max()))
     throw InputError("extract: " + std::to_string(total_vertices) + " vertices; PLY int indices allow 2^31 - 1");
 
   // --- Pass 5: faces in global numbers, to the home of their smallest vertex -----------------------
   report(progress, "extract", 3, kStages);
-  Mailbox homed_faces(m.scratch, "homed_faces");
+  Impl::Pass faces_pass{"faces", {"homed_faces"}};
+  Mailbox& homed_faces = m.box("homed_faces");
   {
     const std::vector<std::uint64_t> pieces = piece_faces.destinations();
-    tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t k) {
+    m.run_pass(faces_pass, pieces, [&](std::size_t k) {
       const std::uint64_t X = pieces[k];
       const std::vector<Rank> answers = ranks.collect<Rank>(X);
       std::vector<std::uint32_t> global(answers.size()), home(answers.size());
@@ -930,15 +1077,16 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         homed_faces.post(m.bricks[routed[i].first].code, X, batch);
         i = j;
       }
-    });
+    }, progress, nullptr);
   }
+  m.forget({"ranks", "piece_faces"});
 
   // --- Pass 6: each home's faces sorted, interior zero faces cancelled ---------------------------
-  Mailbox final_faces(m.scratch, "final_faces");
-  std::atomic<std::size_t> interior{0};
+  Impl::Pass sort_pass{"sort", {"final_faces", "tally_sort"}};
+  Mailbox& final_faces = m.box("final_faces");
   {
     const std::vector<std::uint64_t> homes = homed_faces.destinations();
-    tbb::parallel_for(std::size_t(0), homes.size(), [&](std::size_t k) {
+    m.run_pass(sort_pass, homes, [&](std::size_t k) {
       std::vector<Face> faces = homed_faces.collect<Face>(homes[k]);
       // Zero faces: both copies of an interior one have the same vertex set.
       std::vector<std::pair<std::array<std::uint32_t, 3>, std::size_t>> by_set;
@@ -950,6 +1098,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
       }
       std::sort(by_set.begin(), by_set.end());
       std::vector<std::uint8_t> cancelled(faces.size(), 0);
+      std::uint64_t interior = 0;
       for (std::size_t i = 0; i + 1 < by_set.size(); ++i)
         if (by_set[i + 1].first == by_set[i].first) {
           cancelled[by_set[i].second] = cancelled[by_set[i + 1].second] = 1;
@@ -962,9 +1111,11 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         if (!cancelled[i]) kept.push_back({faces[i].v[0], faces[i].v[1], faces[i].v[2]});
       std::sort(kept.begin(), kept.end());
       final_faces.post(homes[k], homes[k], kept);
-    });
+      m.box("tally_sort").post(0, homes[k], std::vector<Tally>{{{interior}}});
+    }, progress, nullptr);
   }
-  st.interior_zero_faces = interior.load();
+  m.forget({"homed_faces"});
+  st.interior_zero_faces = m.sum("sort").v[0];
 
   // --- Pass 7: components, then the stream ---------------------------------------------------------
   report(progress, "extract", 4, kStages);
@@ -1035,6 +1186,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
   out.end();
   st.triangles = faces_out;
   report(progress, "extract", kStages, kStages);
+  st.resumed_items = m.resumed.load();
   if (stats) *stats = st;
 }
 

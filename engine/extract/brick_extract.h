@@ -26,31 +26,72 @@
 //                   of such a face meet at the same home brick)
 //   7 write         small components are removed (union-find over the vertex numbers, 8 bytes
 //                   per vertex) and the mesh is streamed out, brick by brick in Morton order.
+//
+// With a journal (a job's), the extraction resumes brick by brick: a killed run's next run skips
+// the bricks each pass finished and reads what they posted (ExtractJournal).
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "engine/extract/extract.h"
 #include "engine/geometry.h"
 #include "engine/mesh.h"
 #include "engine/progress.h"
+#include "storage/mailbox.h"
 
 namespace sf {
 
+// Where a brick extraction records its progress (the job's SQLite journal, scheduler/job.h).
+// Passes run over items (bricks; for "regularize", the sources given to add); a commit records the
+// items a pass finished and the mailbox blobs they posted, after the mailbox files are synced.
+// A run that finds committed items skips them and reopens the mailboxes with the committed
+// blobs, so its result is byte-identical to an uninterrupted run's.
+class ExtractJournal {
+ public:
+  struct Record {
+    std::string box;
+    Mailbox::Blob blob;
+  };
+  // The item a pass commits when it is complete.
+  static constexpr std::uint64_t kWholePass = ~std::uint64_t{0};
+
+  virtual ~ExtractJournal() = default;
+  // What earlier runs committed: (pass, item) finished, and mailbox blobs.
+  virtual std::vector<std::pair<std::string, std::uint64_t>> finished() const = 0;
+  virtual std::vector<Record> blobs() const = 0;
+  // One transaction.
+  virtual void commit(const std::string& pass, const std::vector<std::uint64_t>& items,
+                      const std::vector<Record>& blobs) = 0;
+  // Mailboxes no later pass reads: their blobs are dropped (the caller deletes the files after).
+  virtual void forget(const std::vector<std::string>& boxes) = 0;
+  // Seconds between commits while a pass runs (0: after every item).
+  virtual double commit_seconds() const = 0;
+};
+
 class BrickExtraction {
  public:
-  // Scratch files go to `scratch` (created; removed when done). Of `memory_budget`, a quarter
-  // holds decoded bricks for the windows and half the windows' triangulations in flight (a window
-  // larger than that runs alone).
+  // Scratch files go to `scratch` (created; removed when done, unless there is a journal: then
+  // the journal's owner removes them). Of `memory_budget`, a quarter holds decoded bricks for the
+  // windows and half the windows' triangulations in flight (a window larger than that runs alone).
   BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level, const ExtractOptions& options,
-                  std::size_t memory_budget);
+                  std::size_t memory_budget, ExtractJournal* journal = nullptr);
   ~BrickExtraction();
   BrickExtraction(const BrickExtraction&) = delete;
   BrickExtraction& operator=(const BrickExtraction&) = delete;
 
-  // Adds voxels of any bricks (each voxel once over all calls). Thread-safe.
-  void add(const std::vector<SurfaceVoxel>& voxels);
+  // Adds voxels of any bricks (each voxel once over all calls), all those of `source` (e.g. the
+  // brick they were regularized in) at once. Thread-safe. Then all_added().
+  void add(std::uint64_t source, const std::vector<SurfaceVoxel>& voxels);
+  // Whether an earlier run (of the journal) added `source` already / added everything.
+  bool added_before(std::uint64_t source) const;
+  bool all_added_before() const;
+  void all_added();
+  // Voxels added (after all_added()).
+  std::size_t size() const;
 
   // Every voxel added, brick by brick (for the global extraction, when they are few enough).
   // No add() after this.

@@ -487,7 +487,8 @@ Mesh extract_surface(const std::vector<SurfaceVoxel>& voxels, const RootCube& ro
   if (options.brick_level >= 0) {
     const ScratchFolder scratch("scalefuse-extract");
     BrickExtraction bricks(scratch.path(), root, options.brick_level, options, std::size_t{1} << 30);
-    bricks.add(voxels);
+    bricks.add(0, voxels);
+    bricks.all_added();
     MeshCollector mesh;
     bricks.run(mesh, progress, stats);
     return std::move(mesh.mesh);

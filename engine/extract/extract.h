@@ -94,6 +94,9 @@ struct ExtractStats {
   // window_cells_rejected: candidate cells a brick owned in its window that the certificate
   // showed not to be global (a voxel outside the window inside their circumsphere).
   std::size_t windows = 0, window_points = 0, windows_regrown = 0, windows_split = 0, window_cells_rejected = 0;
+  // Brick by brick, resumed from a job's journal: items (bricks) an earlier run had finished, over
+  // regularization and the passes, that this run skipped.
+  std::size_t resumed_items = 0;
   bool by_brick = false;  // which tetrahedralization ran
 };
 
