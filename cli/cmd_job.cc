@@ -41,6 +41,10 @@ void run_status(const std::string& dir, bool json) {
                         {"tile_bytes", st.tile_bytes}, {"journal_bytes", st.journal_bytes},
                         {"last_checkpoint", st.last_checkpoint},
                         {"sweep", {{"tiles", st.sweep_tiles}, {"tile", st.sweep_tile}, {"steps", st.sweep_steps}}}};
+    nlohmann::json passes = nlohmann::json::array();
+    for (const JobStatus::ExtractPass& p : st.extraction)
+      passes.push_back({{"pass", p.pass}, {"bricks", p.bricks}, {"complete", p.complete}});
+    j["extraction"] = passes;
     std::printf("%s\n", j.dump(2).c_str());
     return;
   }
@@ -57,6 +61,12 @@ void run_status(const std::string& dir, bool json) {
     std::printf("sweep        in tile %zu of %zu, %zu steps (depth map x tile) done\n", st.sweep_tile + 1, st.sweep_tiles,
                 st.sweep_steps);
   std::printf("bricks       %zu\n", st.bricks);
+  if (!st.extraction.empty()) {
+    std::string passes;
+    for (const JobStatus::ExtractPass& p : st.extraction)
+      passes += (passes.empty() ? "" : ", ") + p.pass + (p.complete ? " done" : " " + std::to_string(p.bricks) + " bricks");
+    std::printf("extraction   %s\n", passes.c_str());
+  }
   std::printf("on disk      %.1f MiB of tiles, %.1f MiB of journal\n", double(st.tile_bytes) / (1 << 20),
               double(st.journal_bytes) / (1 << 20));
 }

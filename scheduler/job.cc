@@ -321,6 +321,7 @@ ExtractJournal* Job::extraction(const std::string& signature, const std::filesys
     std::error_code ec;
     std::filesystem::remove_all(scratch, ec);
   }
+  set_meta(db_, "stage", "extracting", where);
   scratch_ = scratch;
   // Commits at most every 30 s (the integration's checkpoint interval when shorter): a brick
   // pass loses at most that much work.
@@ -534,6 +535,16 @@ JobStatus Job::recorded(const std::filesystem::path& dir, std::string* config) {
         st.bricks = std::size_t(s.integer(0));
         st.tile_bytes = std::uint64_t(s.integer(1));
       }
+    }
+    bool has_extraction = false;  // jobs of older builds have no such table
+    {
+      Statement s(db, "SELECT COUNT(*) FROM sqlite_master WHERE name = 'extract_done'", where);
+      has_extraction = s.step() && s.integer(0) > 0;
+    }
+    if (has_extraction) {
+      Statement s(db, "SELECT pass, SUM(item != -1), MAX(item = -1), MIN(rowid) FROM extract_done GROUP BY pass ORDER BY 4",
+                  where);
+      while (s.step()) st.extraction.push_back({s.text(0), std::size_t(s.integer(1)), s.integer(2) != 0});
     }
   } catch (...) {
     sqlite3_close(db);

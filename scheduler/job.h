@@ -57,7 +57,7 @@ struct JobOptions {
 };
 
 struct JobStatus {
-  std::string stage;  // "new", "integrating", "integrated", "done"
+  std::string stage;  // "new", "integrating", "integrated", "extracting", "done"
   std::string input, output;  // input: the job's input folders, one per line
   std::size_t depth_maps = 0, integrated = 0, bricks = 0;
   // A sweep under way (sweep_tiles > 0): its tiles, the tile it is in, steps done.
@@ -65,6 +65,14 @@ struct JobStatus {
   std::uint64_t tile_bytes = 0, journal_bytes = 0;
   std::string last_checkpoint;  // UTC time, empty if none
   bool follow = false;          // started by fuse --follow
+  // The brick extraction under way: per pass (in order), the bricks it finished and whether it
+  // is complete.
+  struct ExtractPass {
+    std::string pass;
+    std::size_t bricks = 0;
+    bool complete = false;
+  };
+  std::vector<ExtractPass> extraction;
 };
 
 class Job : public FusionJournal {

@@ -158,6 +158,11 @@ TEST(Job, KilledDuringBrickExtractionResumesBrickByBrick) {
     ASSERT_NE(killed.code, 0) << "the process was to kill itself";
     EXPECT_FALSE(fs::exists(out));
     EXPECT_TRUE(fs::exists(job / "scratch"));
+    const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
+    EXPECT_EQ(st["stage"], "extracting");
+    ASSERT_FALSE(st["extraction"].empty());
+    EXPECT_EQ(st["extraction"][0]["pass"], "regularize");
+    EXPECT_EQ(st["extraction"].back()["complete"], false) << "killed in that pass";
     const CliRun resumed = scalefuse("resume " + job.string() + " -q --stats " + out.string() + ".json");
     ASSERT_EQ(resumed.code, 0) << resumed.output;
     EXPECT_TRUE(bytes_of(out) == expected);
