@@ -281,7 +281,7 @@ BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& 
   impl_->B = brick_level;
   impl_->options = options;
   impl_->cache_bytes = memory_budget / 4;
-  impl_->window_budget = memory_budget / 2;
+  impl_->window_budget = memory_budget / 5 * 2;
   impl_->journal = journal;
   if (journal) {
     for (const auto& [pass, item] : journal->finished()) impl_->finished_before[pass].insert(item);
@@ -640,7 +640,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
           int widest = 0;
           for (int a = 1; a < 3; ++a)
             if (ext.owners[1][a] - ext.owners[0][a] > ext.owners[1][widest] - ext.owners[0][widest]) widest = a;
-          if (need > m.window_budget && ext.owners[1][widest] - ext.owners[0][widest] > 2 * h(ext.first)) {
+          if (2 * need > m.window_budget && ext.owners[1][widest] - ext.owners[0][widest] > 2 * h(ext.first)) {
             const std::int64_t mid = (ext.owners[0][widest] + ext.owners[1][widest] + 1) / 2;
             Window lower = window, upper = window;
             lower.region[1][widest] = upper.region[0][widest] = mid;

@@ -76,7 +76,8 @@ class BrickExtraction {
  public:
   // Scratch files go to `scratch` (created; removed when done, unless there is a journal: then
   // the journal's owner removes them). Of `memory_budget`, a quarter holds decoded bricks for the
-  // windows and half the windows' triangulations in flight (a window larger than that runs alone).
+  // windows and 40 % the windows' triangulations in flight (a window larger than that runs
+  // alone; one larger than half of that is split between its owners where it can be).
   BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level, const ExtractOptions& options,
                   std::size_t memory_budget, ExtractJournal* journal = nullptr);
   ~BrickExtraction();
