@@ -433,9 +433,15 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
     box("tally_prepare").post(0, codes[bi], std::vector<Tally>{{{bits, out.size(), v.size() - out.size(), codes[bi]}}});
   }, progress, "prepare");
   forget({"incoming"});
-  // The bricks, from the tallies (they outlive the survivors, which pass 1 consumes).
+  // The bricks and their counts, from the tallies (they outlive the survivors, which pass 1
+  // consumes).
   std::vector<std::uint64_t> codes_kept;
-  for (const Tally& t : box("tally_prepare").collect<Tally>(0)) codes_kept.push_back(t.v[3]);
+  for (const Tally& t : box("tally_prepare").collect<Tally>(0)) {
+    levels |= std::uint32_t(t.v[0]);
+    st->voxels += t.v[1];
+    st->coincident_voxels += t.v[2];
+    codes_kept.push_back(t.v[3]);
+  }
   std::sort(codes_kept.begin(), codes_kept.end());
   for (std::uint64_t code : codes_kept)
     bricks.push_back({code, compact_bits(code), compact_bits(code >> 1), compact_bits(code >> 2)});
@@ -443,10 +449,6 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
   tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
   occ.cells.erase(std::unique(occ.cells.begin(), occ.cells.end()), occ.cells.end());
   occ.cells.shrink_to_fit();
-  const Tally levels_seen = sum("prepare", true), counts = sum("prepare");
-  levels = std::uint32_t(levels_seen.v[0]);
-  st->voxels = counts.v[1];
-  st->coincident_voxels = counts.v[2];
 }
 
 void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractStats* stats) {
