@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "engine/extract/voxel_set.h"
@@ -63,6 +64,56 @@ TEST(Mailbox, LargeBlobsRoundTripAndFilesGoAway) {
   }
   EXPECT_FALSE(std::filesystem::exists(file));
   EXPECT_FALSE(std::filesystem::exists(file.parent_path()));
+}
+
+TEST(Mailbox, ReopensWithTheCommittedBlobsOnly) {
+  // A run posts from sources 1 and 2 and "commits" source 1 only (its blobs, after a sync);
+  // killed, it leaves source 2's blob in the file. The next run sees source 1's blob, redoes
+  // source 2 after it, and collects in (source, posting) order.
+  const ScratchFolder dir("scalefuse-mailbox-reopen");
+  std::vector<Mailbox::Blob> committed;
+  {
+    Mailbox box(dir.path(), "kept");
+    box.keep_file();
+    box.post(5, 1, std::vector<std::uint32_t>{10, 11});
+    box.post(5, 2, std::vector<std::uint32_t>{99});  // uncommitted
+    box.post(6, 1, std::vector<std::uint32_t>{12});
+    committed = box.sync_blobs_from({1});
+    ASSERT_EQ(committed.size(), 2u);
+    EXPECT_EQ(committed[0].src, 1u);
+    EXPECT_EQ(committed[1].dest, 6u);
+    EXPECT_TRUE(box.sync_blobs_from({3}).empty());
+  }
+  ASSERT_TRUE(std::filesystem::exists(dir.path() / "kept.box"));
+  {
+    Mailbox box(dir.path(), "kept", committed);
+    box.keep_file();
+    EXPECT_TRUE(box.sync_blobs_from({1}).empty()) << "committed blobs are not new";
+    box.post(5, 2, std::vector<std::uint32_t>{20});
+    box.post(5, 0, std::vector<std::uint32_t>{7});
+    const std::vector<Mailbox::Blob> fresh = box.sync_blobs_from({0, 2});
+    EXPECT_EQ(fresh.size(), 2u);
+    EXPECT_EQ(box.collect<std::uint32_t>(5), (std::vector<std::uint32_t>{7, 10, 11, 20}));
+    EXPECT_EQ(box.collect<std::uint32_t>(6), (std::vector<std::uint32_t>{12}));
+    EXPECT_EQ(box.raw_bytes(5), 16u);
+    EXPECT_THROW(box.sync_blobs_from({2}), std::logic_error) << "no journal sync once collecting began";
+    box.remove_file();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "kept.box"));
+  // A file shorter than its record says: refused, naming it.
+  {
+    Mailbox box(dir.path(), "short");
+    box.keep_file();
+    box.post(1, 1, std::vector<std::uint32_t>(1000, 3));
+    committed = box.sync_blobs_from({1});
+  }
+  std::filesystem::resize_file(dir.path() / "short.box", 10);
+  try {
+    Mailbox box(dir.path(), "short", committed);
+    ADD_FAILURE() << "a truncated scratch file was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("short.box"), std::string::npos) << e.what();
+  }
 }
 
 TEST(VertexOrder, MortonCodesByHand) {
