@@ -14,6 +14,9 @@
 #include <chrono>
 #include <functional>
 #include <list>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <map>
 #include <set>
 #include <mutex>
@@ -192,6 +195,15 @@ struct BrickExtraction::Impl {
   }
 };
 
+// Between passes, the heap the last one freed goes back to the system: glibc keeps freed blocks
+// of the windows' triangulations (hundreds of MiB, below its mmap threshold once that has grown)
+// in its arenas, where the next pass's different sizes fragment them further.
+static void release_freed_memory() {
+#ifdef __GLIBC__
+  ::malloc_trim(0);
+#endif
+}
+
 Mailbox& BrickExtraction::Impl::box(const std::string& name) {
   std::lock_guard lock(boxes_mutex);
   std::unique_ptr<Mailbox>& b = boxes[name];
@@ -267,6 +279,7 @@ void BrickExtraction::Impl::run_pass(Pass& p, const std::vector<std::uint64_t>& 
   });
   std::lock_guard lock(p.mutex);
   commit(p, true);
+  release_freed_memory();
 }
 
 BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level,
@@ -840,6 +853,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
     m.cached.clear();
     m.cached_bytes = 0;
   }
+  release_freed_memory();
   m.forget({"survivors", "occupancy"});
 
   // --- Pass 2: snaps ---------------------------------------------------------------------------
