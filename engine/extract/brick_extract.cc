@@ -412,10 +412,7 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
         throw InputError("extract: voxel at " + describe(v[i].key) + " " + what);
       };
       if (i > 0 && v[i].key == v[i - 1].key) fail("is given twice");
-      if (!std::isfinite(v[i].distance)) fail("has a non-finite distance");
-      if (!std::isfinite(v[i].weight)) fail("has a non-finite weight");
-      for (float c : v[i].colour)
-        if (!std::isfinite(c)) fail("has a non-finite colour");
+      if (const char* problem = value_problem(v[i])) fail(problem);
     }
     // A voxel coincides with the voxels its even coordinates reach by halving, all in this brick;
     // keep the finest (section 6 has normally dropped the others already).

@@ -104,11 +104,7 @@ void validate(const SurfaceVoxel& v, std::size_t i) {
       return s.str();
     }() + ")");
   }
-  if (!std::isfinite(v.distance)) fail("at " + describe(k) + " has a non-finite distance");
-  if (!std::isfinite(v.weight)) fail("at " + describe(k) + " has a non-finite weight");
-  for (float c : v.colour) {
-    if (!std::isfinite(c)) fail("at " + describe(k) + " has a non-finite colour");
-  }
+  if (const char* problem = extract_detail::value_problem(v)) fail("at " + describe(k) + " " + problem);
 }
 
 // Sorts by key, rejects duplicated keys, and drops every voxel that coincides with a finer one.

@@ -74,6 +74,16 @@ inline Attributes crossing_attributes(const Voxels& v, std::uint32_t lo, std::ui
 
 inline std::uint8_t to_byte(float c) { return std::uint8_t(std::lround(std::clamp(c, 0.0f, 255.0f))); }
 
+// What is wrong with a voxel's values (non-finite distance, weight or colour), or nullptr; both
+// extraction paths check their input with it.
+inline const char* value_problem(const SurfaceVoxel& v) {
+  if (!std::isfinite(v.distance)) return "has a non-finite distance";
+  if (!std::isfinite(v.weight)) return "has a non-finite weight";
+  for (float c : v.colour)
+    if (!std::isfinite(c)) return "has a non-finite colour";
+  return nullptr;
+}
+
 // "level L (x, y, z)", for error messages.
 inline std::string describe(VoxelKey k) {
   std::ostringstream s;
