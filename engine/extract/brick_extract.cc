@@ -21,12 +21,14 @@
 #include <set>
 #include <mutex>
 #include <numeric>
+#include <optional>
 #include <sstream>
 #include <unordered_map>
 
 #include "engine/error.h"
 #include "engine/extract/certificate.h"
 #include "engine/extract/delaunay.h"
+#include "engine/extract/lattice_cubes.h"
 #include "engine/extract/marching_tets.h"
 #include "engine/extract/voxel_set.h"
 #include "storage/mailbox.h"
@@ -96,6 +98,8 @@ struct BrickVoxels {
 // A window's triangulation and its side arrays, per point (CGAL's cells and vertices, about 550
 // bytes per point as measured on the global path, plus the window's own lists).
 constexpr std::size_t kWindowBytesPerPoint = 650;
+// Per window voxel, triangulated or not: its lists and its part of the empty cubes' index.
+constexpr std::size_t kWindowBytesPerVoxel = 120;
 
 // Per-item counters of a pass, summed at the end (they go through a mailbox, so that a resumed
 // run counts the items an earlier run did).
@@ -203,6 +207,28 @@ static void release_freed_memory() {
   ::malloc_trim(0);
 #endif
 }
+
+// While windows are built, freed heap stays in the process: glibc would otherwise unmap the big
+// blocks of one window's triangulation and trim its heap tops, and the next window would fault
+// the same pages in again (a tenth of the pass on a VM, where a page fault exits to the host).
+// release_freed_memory() after the pass hands the heap back.
+class HeapRetention {
+ public:
+  HeapRetention() {
+#ifdef __GLIBC__
+    ::mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's maximum
+    ::mallopt(M_TRIM_THRESHOLD, 1 << 30);
+#endif
+  }
+  ~HeapRetention() {
+#ifdef __GLIBC__
+    ::mallopt(M_TRIM_THRESHOLD, 128 << 10);  // glibc's initial values
+    ::mallopt(M_MMAP_THRESHOLD, 128 << 10);
+#endif
+  }
+  HeapRetention(const HeapRetention&) = delete;
+  HeapRetention& operator=(const HeapRetention&) = delete;
+};
 
 Mailbox& BrickExtraction::Impl::box(const std::string& name) {
   std::lock_guard lock(boxes_mutex);
@@ -477,11 +503,12 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
   Impl::Pass windows_pass{"tetrahedralize", {"piece_voxels", "piece_cells", "offers", "tally_windows"}};
   Mailbox &piece_voxels = m.box("piece_voxels"), &piece_cells = m.box("piece_cells"), &offers = m.box("offers");
   struct Counters {
-    std::uint64_t tetrahedra, kept, windows, points, regrown, split, rejected, pad;
+    std::uint64_t tetrahedra, kept, windows, points, regrown, split, rejected, in_cubes;
   };
   static_assert(sizeof(Counters) == sizeof(Tally));
   std::vector<std::uint64_t> codes(nb);
   for (std::size_t i = 0; i < nb; ++i) codes[i] = m.bricks[i].code;
+  std::optional<HeapRetention> retention(std::in_place);
   m.run_pass(windows_pass, codes, [&](std::size_t bi) {
     Counters count{};
     {
@@ -647,7 +674,28 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
             member_points[i] = found[i].second.second;
           }
         }
-        const std::size_t need = member_points.size() * kWindowBytesPerPoint;
+        // Empty lattice cubes (lattice_cubes.h) give their cells outright; the voxels inside their
+        // union stay out of the triangulation, which the others get.
+        std::vector<std::uint8_t> member_levels(members.size());
+        for (std::size_t i = 0; i < members.size(); ++i) member_levels[i] = std::uint8_t(members[i]->key.level());
+        const EmptyCubes cubes(member_points, member_levels, m.G, m.levels,
+                               [&](int L, const std::int64_t lo[3], const std::int64_t hi[3]) {
+                                 const std::int64_t(&b)[2][3] = ext.box[std::max(L, ext.first)];
+                                 for (int a = 0; a < 3; ++a)
+                                   if (lo[a] < b[0][a] || hi[a] > b[1][a]) return false;
+                                 return true;
+                               });
+        std::vector<LatticePoint> tri_points, cube_points;
+        std::vector<std::uint32_t> tri_member;  // triangulated point -> member
+        for (std::size_t i = 0; i < members.size(); ++i) {
+          if (cubes.interior(i)) {
+            cube_points.push_back(member_points[i]);
+          } else {
+            tri_member.push_back(std::uint32_t(i));
+            tri_points.push_back(member_points[i]);
+          }
+        }
+        const std::size_t need = tri_points.size() * kWindowBytesPerPoint + members.size() * kWindowBytesPerVoxel;
         {
           int widest = 0;
           for (int a = 1; a < 3; ++a)
@@ -710,9 +758,14 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
               m.window_freed.notify_all();
             }
           } release{m, need};
-          const DelaunayTetrahedralization dt(member_points, false, nullptr);
-          dt.for_each_cell([&](const Tet& t) {
-            if (!certified) return;
+          // Interior voxels, for the certificate of the triangulated cells (grid cells of two
+          // finest voxels a side).
+          int finest = 0;
+          for (std::uint8_t l : member_levels) finest = std::max<int>(finest, l);
+          const PointGrid interior(cube_points, std::max(0, m.G - finest + 1));
+          // t: member indices. Cells the brick owns, kept by 7.1, with a negative voxel; `known`:
+          // a cell of an empty cube, global without a certificate.
+          const auto consider = [&](const Tet& t, bool known) {
             int owner = 0;
             for (int k = 1; k < 4; ++k) {
               const int lk = v.key[t[k]].level(), lo_ = v.key[t[owner]].level();
@@ -727,28 +780,44 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
             ++mine.tetrahedra;
             if (!keep_cell(t, v, n)) return;
             ++mine.kept;
+            // Cells without a negative voxel never emit; the others may once snapping (7.2) has
+            // zeroed some of their voxels.
             if (cell_kind(cell_distances(t, v.distance)) == CellKind::kNever) return;
-            if (!whole) {
+            if (!known && (!whole || !interior.empty())) {
               const LatticePoint* corners[4] = {&member_points[t[0]], &member_points[t[1]], &member_points[t[2]],
                                                 &member_points[t[3]]};
               Ball ball;
-              const Certificate c = circumball(corners, &ball)
-                                        ? certify(ball, corners, ext.inner[0], ext.inner[1], outside, m.occ)
-                                        : Certificate::kUnknown;
-              if (c == Certificate::kNotGlobal) {
-                ++mine.rejected;
-                return;
-              }
+              const Certificate c = !circumball(corners, &ball) ? Certificate::kUnknown
+                                    : whole ? Certificate::kGlobal
+                                            : certify(ball, corners, ext.inner[0], ext.inner[1], outside, m.occ);
               if (c == Certificate::kUnknown) {
                 certified = false;
                 return;
               }
+              if (c == Certificate::kNotGlobal || interior.any_in_ball(ball, corners)) {
+                ++mine.rejected;
+                return;
+              }
             }
             cells.push_back(t);
+          };
+          const DelaunayTetrahedralization dt(tri_points, false, nullptr);
+          dt.for_each_cell([&](const Tet& local) {
+            if (!certified) return;
+            const Tet t{tri_member[local[0]], tri_member[local[1]], tri_member[local[2]], tri_member[local[3]]};
+            if (!cubes.contains(t)) consider(t, false);
           });
+          if (certified)
+            for (const std::array<std::uint32_t, 8>& corner : cubes.cubes()) {
+              bool negative = false;
+              for (std::uint32_t i : corner) negative = negative || v.distance[i] < 0;
+              if (!negative) continue;  // none of its cells has a negative voxel
+              for (const auto& c : kCubeCells) consider(Tet{corner[c[0]], corner[c[1]], corner[c[2]], corner[c[3]]}, true);
+            }
         }
         ++count.windows;
-        count.points += member_points.size();
+        count.points += tri_points.size();
+        count.in_cubes += cube_points.size();
         if (!certified) {
           ++count.regrown;
           Window wider = window;
@@ -843,6 +912,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
     st.windows_regrown = c.regrown;
     st.windows_split = c.split;
     st.window_cells_rejected = c.rejected;
+    st.window_voxels_in_cubes = c.in_cubes;
   }
   {
     std::lock_guard lock(m.cache_mutex);
@@ -850,6 +920,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
     m.cached.clear();
     m.cached_bytes = 0;
   }
+  retention.reset();
   release_freed_memory();
   m.forget({"survivors", "occupancy"});
 

@@ -80,4 +80,62 @@ Certificate certify(const Ball& ball, const LatticePoint* cell_points[4], const 
   return Certificate::kGlobal;
 }
 
+PointGrid::PointGrid(const std::vector<LatticePoint>& points, int shift) : shift_(shift), cell_at_(points.size()) {
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const LatticePoint& p = points[i];
+    by_cell[i] = {Occupancy::pack(p[0] >> shift, p[1] >> shift, p[2] >> shift), std::uint32_t(i)};
+  }
+  std::sort(by_cell.begin(), by_cell.end());
+  points_.reserve(points.size());
+  for (std::size_t i = 0; i < by_cell.size(); ++i) {
+    if (i == 0 || by_cell[i].first != by_cell[i - 1].first) {
+      cell_at_.insert(by_cell[i].first, std::uint32_t(starts_.size()));
+      starts_.push_back(std::uint32_t(i));
+    }
+    points_.push_back(points[by_cell[i].second]);
+  }
+  starts_.push_back(std::uint32_t(points_.size()));
+}
+
+bool PointGrid::any_in_ball(const Ball& ball, const LatticePoint* cell_points[4]) const {
+  if (points_.empty()) return false;
+  const long double r = ball.radius + kBallMargin, r2 = r * r;
+  const auto inside = [&](const LatticePoint& p) {
+    long double d2 = 0;
+    for (int k = 0; k < 3; ++k) d2 += (ball.centre[k] - p[k]) * (ball.centre[k] - p[k]);
+    return d2 <= r2 && lattice_side_of_sphere(cell_points, p) > 0;
+  };
+  const long double cell = static_cast<long double>(std::int64_t{1} << shift_);
+  std::int64_t c0[3], c1[3], mid[3];
+  bool small = true;
+  for (int k = 0; k < 3; ++k) {
+    const long double a = std::floor((ball.centre[k] - r) / cell), b = std::floor((ball.centre[k] + r) / cell);
+    small = small && a > -1e6L && b < 1e6L;
+    c0[k] = small ? std::max<std::int64_t>(0, std::int64_t(a)) : 0;
+    c1[k] = small ? std::int64_t(b) : 0;
+    mid[k] = small ? std::clamp(std::int64_t(std::floor(ball.centre[k] / cell)), c0[k], c1[k]) : 0;
+  }
+  // A sliver's huge ball: look at every point rather than at its many empty cells.
+  if (!small || std::uint64_t((c1[0] - c0[0] + 1) * (c1[1] - c0[1] + 1) * (c1[2] - c0[2] + 1)) > starts_.size()) {
+    for (const LatticePoint& p : points_)
+      if (inside(p)) return true;
+    return false;
+  }
+  const auto any_in_cell = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+    const std::int64_t run = cell_at_.find(Occupancy::pack(x, y, z));
+    if (run < 0) return false;
+    for (std::uint32_t i = starts_[std::size_t(run)]; i < starts_[std::size_t(run) + 1]; ++i)
+      if (inside(points_[i])) return true;
+    return false;
+  };
+  // The centre's cell first: where a ball reaches into the interior, it is mostly there.
+  if (any_in_cell(mid[0], mid[1], mid[2])) return true;
+  for (std::int64_t z = c0[2]; z <= c1[2]; ++z)
+    for (std::int64_t y = c0[1]; y <= c1[1]; ++y)
+      for (std::int64_t x = c0[0]; x <= c1[0]; ++x)
+        if (!(x == mid[0] && y == mid[1] && z == mid[2]) && any_in_cell(x, y, z)) return true;
+  return false;
+}
+
 }  // namespace sf::extract_detail

@@ -93,7 +93,10 @@ struct ExtractStats {
   // and kept_tetrahedra then count the cells each brick owns in its windows.
   // window_cells_rejected: candidate cells a brick owned in its window that the certificate
   // showed not to be global (a voxel outside the window inside their circumsphere).
+  // window_voxels_in_cubes: window voxels inside empty lattice cubes (lattice_cubes.h), whose
+  // cells are known and which are not triangulated; window_points counts the others.
   std::size_t windows = 0, window_points = 0, windows_regrown = 0, windows_split = 0, window_cells_rejected = 0;
+  std::size_t window_voxels_in_cubes = 0;
   // Brick by brick, resumed from a job's journal: items (bricks) an earlier run had finished, over
   // regularization and the passes, that this run skipped.
   std::size_t resumed_items = 0;

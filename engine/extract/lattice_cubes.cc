@@ -1,0 +1,106 @@
+#include "engine/extract/lattice_cubes.h"
+
+#include <algorithm>
+#include <numeric>
+
+namespace sf::extract_detail {
+namespace {
+
+// (level, x, y, z) of a lattice position of that level; indices are at most 2^18.
+constexpr int kField = 19;
+std::uint64_t cube_key(int level, std::int64_t x, std::int64_t y, std::int64_t z) {
+  return (std::uint64_t(level) << (3 * kField)) | (std::uint64_t(z) << (2 * kField)) | (std::uint64_t(y) << kField) |
+         std::uint64_t(x);
+}
+std::uint64_t cell_key(std::int64_t x, std::int64_t y, std::int64_t z) { return cube_key(0, x, y, z); }
+
+}  // namespace
+
+EmptyCubes::EmptyCubes(const std::vector<LatticePoint>& points, const std::vector<std::uint8_t>& level, int G,
+                       std::uint32_t levels, const Holds& holds)
+    : points_(points), level_(level), G_(G), cube_at_(points.size()), interior_(points.size(), 0) {
+  const std::size_t count = points.size();
+  const auto index_of = [&](std::size_t i, int a) { return std::int64_t(points[i][a]) >> (G - level[i]); };
+  FlatMap point_at(count);
+  std::uint32_t here = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    point_at.insert(cube_key(level[i], index_of(i, 0), index_of(i, 1), index_of(i, 2)), std::uint32_t(i));
+    here |= 1u << level[i];
+  }
+  const auto find = [&](std::uint64_t key) { return point_at.find(key); };
+  // Per level l with finer voxels in the set: their cells on the grid of level l + 1.
+  std::vector<std::vector<std::uint64_t>> finer(std::size_t(G) + 1);
+  for (int l = 0; l < G; ++l) {
+    if (!(here >> l & 1) || !(here >> (l + 1))) continue;
+    const int shift = G - l - 1;
+    for (std::size_t i = 0; i < count; ++i)
+      if (level[i] > l) finer[l].push_back(cell_key(points[i][0] >> shift, points[i][1] >> shift, points[i][2] >> shift));
+    std::sort(finer[l].begin(), finer[l].end());
+  }
+  const std::int64_t side = std::int64_t{1} << G;
+  for (std::size_t i = 0; i < count; ++i) {
+    const int l = level[i];
+    const std::int64_t x = index_of(i, 0), y = index_of(i, 1), z = index_of(i, 2);
+    std::array<std::uint32_t, 8> corner;
+    bool complete = true;
+    for (int c = 0; c < 8 && complete; ++c) {
+      const std::int64_t j = c == 0 ? std::int64_t(i) : find(cube_key(l, x + (c & 1), y + (c >> 1 & 1), z + (c >> 2 & 1)));
+      complete = j >= 0;
+      corner[c] = std::uint32_t(j);
+    }
+    if (!complete) continue;
+    if (levels >> (l + 1)) {
+      // Finer voxels strictly inside the sphere are within h of its centre on every axis: in the
+      // cube grown by h/2, which the set must be known to hold, on the 4^3 cells of level l + 1
+      // around the centre.
+      const std::int64_t h = std::int64_t{1} << (G - l);
+      std::int64_t lo[3], hi[3];
+      const std::int64_t idx[3] = {x, y, z};
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::max<std::int64_t>(0, idx[a] * h - h / 2);
+        hi[a] = std::min(side, (idx[a] + 1) * h + h / 2);
+      }
+      bool empty = true;
+      for (int L = l + 1; L <= G && empty; ++L)
+        if (levels >> L & 1) empty = holds(L, lo, hi);
+      if (empty && !finer[l].empty())
+        for (std::int64_t cz = 2 * z - 1; cz <= 2 * z + 2 && empty; ++cz)
+          for (std::int64_t cy = 2 * y - 1; cy <= 2 * y + 2 && empty; ++cy) {
+            if (cz < 0 || cy < 0) continue;
+            const auto it = std::lower_bound(finer[l].begin(), finer[l].end(), cell_key(std::max<std::int64_t>(0, 2 * x - 1), cy, cz));
+            empty = !(it != finer[l].end() && *it <= cell_key(2 * x + 2, cy, cz));
+          }
+      if (!empty) continue;
+    }
+    cube_at_.insert(cube_key(l, x, y, z), std::uint32_t(corners_.size()));
+    corners_.push_back(corner);
+  }
+  for (std::size_t i = 0; i < count; ++i) {
+    const int l = level[i];
+    const std::int64_t x = index_of(i, 0), y = index_of(i, 1), z = index_of(i, 2);
+    bool all = x > 0 && y > 0 && z > 0;
+    for (int c = 0; c < 8 && all; ++c)
+      all = cube_at_.find(cube_key(l, x - (c & 1), y - (c >> 1 & 1), z - (c >> 2 & 1))) >= 0;
+    interior_[i] = all;
+  }
+}
+
+bool EmptyCubes::contains(const Tet& t) const {
+  const int l = level_[t[0]];
+  for (int k = 1; k < 4; ++k)
+    if (level_[t[k]] != l) return false;
+  const int shift = G_ - l;
+  std::int64_t lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = hi[a] = std::int64_t(points_[t[0]][a]) >> shift;
+    for (int k = 1; k < 4; ++k) {
+      const std::int64_t v = std::int64_t(points_[t[k]][a]) >> shift;
+      lo[a] = std::min(lo[a], v);
+      hi[a] = std::max(hi[a], v);
+    }
+    if (hi[a] - lo[a] != 1) return false;  // a cell with volume spans its cube on every axis
+  }
+  return cube_at_.find(cube_key(l, lo[0], lo[1], lo[2])) >= 0;
+}
+
+}  // namespace sf::extract_detail
