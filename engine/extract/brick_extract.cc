@@ -21,7 +21,6 @@
 #include <set>
 #include <mutex>
 #include <numeric>
-#include <optional>
 #include <sstream>
 #include <unordered_map>
 
@@ -207,28 +206,6 @@ static void release_freed_memory() {
   ::malloc_trim(0);
 #endif
 }
-
-// While windows are built, freed heap stays in the process: glibc would otherwise unmap the big
-// blocks of one window's triangulation and trim its heap tops, and the next window would fault
-// the same pages in again (a tenth of the pass on a VM, where a page fault exits to the host).
-// release_freed_memory() after the pass hands the heap back.
-class HeapRetention {
- public:
-  HeapRetention() {
-#ifdef __GLIBC__
-    ::mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's maximum
-    ::mallopt(M_TRIM_THRESHOLD, 1 << 30);
-#endif
-  }
-  ~HeapRetention() {
-#ifdef __GLIBC__
-    ::mallopt(M_TRIM_THRESHOLD, 128 << 10);  // glibc's initial values
-    ::mallopt(M_MMAP_THRESHOLD, 128 << 10);
-#endif
-  }
-  HeapRetention(const HeapRetention&) = delete;
-  HeapRetention& operator=(const HeapRetention&) = delete;
-};
 
 Mailbox& BrickExtraction::Impl::box(const std::string& name) {
   std::lock_guard lock(boxes_mutex);
@@ -508,7 +485,6 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
   static_assert(sizeof(Counters) == sizeof(Tally));
   std::vector<std::uint64_t> codes(nb);
   for (std::size_t i = 0; i < nb; ++i) codes[i] = m.bricks[i].code;
-  std::optional<HeapRetention> retention(std::in_place);
   m.run_pass(windows_pass, codes, [&](std::size_t bi) {
     Counters count{};
     {
@@ -920,7 +896,6 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
     m.cached.clear();
     m.cached_bytes = 0;
   }
-  retention.reset();
   release_freed_memory();
   m.forget({"survivors", "occupancy"});
 
