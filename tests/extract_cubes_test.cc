@@ -1,13 +1,12 @@
-// Empty lattice cubes (engine/extract/lattice_cubes.h): their cells are CGAL's, and the
-// triangulation of the voxels outside them, certified against those inside, gives every other
-// cell of the full tetrahedralization and nothing else.
+// Empty lattice cubes (engine/extract/lattice_cubes.h): their cells are CGAL's, and the cells of
+// the triangulation of the voxels outside them whose centroids no empty cube covers are every
+// other cell of the full tetrahedralization and nothing else.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <random>
 #include <set>
 
-#include "engine/extract/certificate.h"
 #include "engine/extract/delaunay.h"
 #include "engine/extract/lattice_cubes.h"
 
@@ -32,7 +31,7 @@ int orientation(const std::vector<LatticePoint>& p, const Tet& t) {
 
 const EmptyCubes::Holds kHoldsAll = [](int, const std::int64_t*, const std::int64_t*) { return true; };
 
-// Cells from empty cubes plus the certified cells of the triangulation of the other points, as the
+// Cells from empty cubes plus the uncovered cells of the triangulation of the other points, as the
 // brick extraction computes them.
 std::set<std::array<std::uint32_t, 4>> cube_path_cells(const std::vector<LatticePoint>& points,
                                                          const std::vector<std::uint8_t>& level, int G,
@@ -40,26 +39,19 @@ std::set<std::array<std::uint32_t, 4>> cube_path_cells(const std::vector<Lattice
   std::uint32_t levels = 0;
   for (std::uint8_t l : level) levels |= 1u << l;
   const EmptyCubes cubes(points, level, G, levels, kHoldsAll);
-  std::vector<LatticePoint> rest, inside;
+  std::vector<LatticePoint> rest;
   std::vector<std::uint32_t> index;
   for (std::size_t i = 0; i < points.size(); ++i) {
-    if (cubes.interior(i)) {
-      inside.push_back(points[i]);
-    } else {
+    if (!cubes.interior(i)) {
       index.push_back(std::uint32_t(i));
       rest.push_back(points[i]);
     }
   }
-  if (interior_count) *interior_count = inside.size();
-  const PointGrid grid(inside, 0);
+  if (interior_count) *interior_count = points.size() - rest.size();
   std::set<std::array<std::uint32_t, 4>> out;
   for (const Tet& local : delaunay_tetrahedra(rest, false)) {
     const Tet t{index[local[0]], index[local[1]], index[local[2]], index[local[3]]};
-    if (cubes.contains(t)) continue;
-    const LatticePoint* corners[4] = {&points[t[0]], &points[t[1]], &points[t[2]], &points[t[3]]};
-    Ball ball;
-    EXPECT_TRUE(circumball(corners, &ball));
-    if (!grid.any_in_ball(ball, corners)) out.insert(sorted(t));
+    if (!cubes.covers(t)) out.insert(sorted(t));
   }
   for (const auto& corner : cubes.cubes())
     for (const auto& c : kCubeCells) {
@@ -104,8 +96,32 @@ TEST(ExtractCubes, FullLatticeIsAllCubesWithItsInnerPointsInterior) {
   }
   EXPECT_EQ(interior, 8u);
   // Every cell of the full triangulation lies in a cube, and the cubes' cells are exactly them.
-  for (const Tet& t : delaunay_tetrahedra(points, false)) EXPECT_TRUE(cubes.contains(t));
+  for (const Tet& t : delaunay_tetrahedra(points, false)) EXPECT_TRUE(cubes.covers(t));
   EXPECT_EQ(cube_path_cells(points, level, G), all_cells(points));
+}
+
+TEST(ExtractCubes, CoversCentroidsInTheClosedCubes) {
+  // One empty cube [2, 4]^3 of level G - 1 (h = 2). A cell's centroid (x, 2.75, 3.5) with x on the
+  // cube's face x = 4, inside, or just outside it.
+  const int G = 4;
+  std::vector<LatticePoint> points;
+  std::vector<std::uint8_t> level;
+  for (int c = 0; c < 8; ++c) {
+    points.push_back({2 * (c & 1) + 2, 2 * (c >> 1 & 1) + 2, 2 * (c >> 2 & 1) + 2});
+    level.push_back(G - 1);
+  }
+  const EmptyCubes cubes(points, level, G, 1u << (G - 1), kHoldsAll);
+  ASSERT_EQ(cubes.cubes().size(), 1u);
+  const auto covers = [&](int x9) {  // centroid x = (2 + x9 + 4 + 4) / 4
+    return cubes.covers({2, 3, 3}, {x9, 3, 3}, {4, 2, 3}, {4, 3, 5});
+  };
+  EXPECT_TRUE(covers(6));   // x = 4: on the face
+  EXPECT_TRUE(covers(5));   // x = 3.75
+  EXPECT_FALSE(covers(7));  // x = 4.25
+  // The cube's own cells: centroids inside.
+  for (const auto& c : kCubeCells) EXPECT_TRUE(cubes.covers(points[c[0]], points[c[1]], points[c[2]], points[c[3]]));
+  // Below the lattice's origin side of the cube: y = 1.75.
+  EXPECT_FALSE(cubes.covers({2, 1, 3}, {6, 1, 3}, {4, 0, 3}, {4, 5, 5}));
 }
 
 TEST(ExtractCubes, AFinerVoxelInsideTheSphereSpoilsTheCube) {

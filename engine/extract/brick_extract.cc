@@ -661,12 +661,10 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
                                    if (lo[a] < b[0][a] || hi[a] > b[1][a]) return false;
                                  return true;
                                });
-        std::vector<LatticePoint> tri_points, cube_points;
+        std::vector<LatticePoint> tri_points;
         std::vector<std::uint32_t> tri_member;  // triangulated point -> member
         for (std::size_t i = 0; i < members.size(); ++i) {
-          if (cubes.interior(i)) {
-            cube_points.push_back(member_points[i]);
-          } else {
+          if (!cubes.interior(i)) {
             tri_member.push_back(std::uint32_t(i));
             tri_points.push_back(member_points[i]);
           }
@@ -734,13 +732,10 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
               m.window_freed.notify_all();
             }
           } release{m, need};
-          // Interior voxels, for the certificate of the triangulated cells (grid cells of two
-          // finest voxels a side).
-          int finest = 0;
-          for (std::uint8_t l : member_levels) finest = std::max<int>(finest, l);
-          const PointGrid interior(cube_points, std::max(0, m.G - finest + 1));
           // t: member indices. Cells the brick owns, kept by 7.1, with a negative voxel; `known`:
-          // a cell of an empty cube, global without a certificate.
+          // a cell of an empty cube, global without a certificate. A triangulated cell whose
+          // centroid an empty cube covers is either that cube's or not global (lattice_cubes.h);
+          // the others are global cells of the window's voxels.
           const auto consider = [&](const Tet& t, bool known) {
             int owner = 0;
             for (int k = 1; k < 4; ++k) {
@@ -753,24 +748,25 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
                 morton(std::uint32_t(brick_axis_of(op[0])), std::uint32_t(brick_axis_of(op[1])),
                        std::uint32_t(brick_axis_of(op[2]))) != X.code)
               return;
+            if (!known && cubes.covers(t)) return;
             ++mine.tetrahedra;
             if (!keep_cell(t, v, n)) return;
             ++mine.kept;
             // Cells without a negative voxel never emit; the others may once snapping (7.2) has
             // zeroed some of their voxels.
             if (cell_kind(cell_distances(t, v.distance)) == CellKind::kNever) return;
-            if (!known && (!whole || !interior.empty())) {
+            if (!known && !whole) {
               const LatticePoint* corners[4] = {&member_points[t[0]], &member_points[t[1]], &member_points[t[2]],
                                                 &member_points[t[3]]};
               Ball ball;
-              const Certificate c = !circumball(corners, &ball) ? Certificate::kUnknown
-                                    : whole ? Certificate::kGlobal
-                                            : certify(ball, corners, ext.inner[0], ext.inner[1], outside, m.occ);
+              const Certificate c = !circumball(corners, &ball)
+                                        ? Certificate::kUnknown
+                                        : certify(ball, corners, ext.inner[0], ext.inner[1], outside, m.occ);
               if (c == Certificate::kUnknown) {
                 certified = false;
                 return;
               }
-              if (c == Certificate::kNotGlobal || interior.any_in_ball(ball, corners)) {
+              if (c == Certificate::kNotGlobal) {
                 ++mine.rejected;
                 return;
               }
@@ -781,7 +777,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
           dt.for_each_cell([&](const Tet& local) {
             if (!certified) return;
             const Tet t{tri_member[local[0]], tri_member[local[1]], tri_member[local[2]], tri_member[local[3]]};
-            if (!cubes.contains(t)) consider(t, false);
+            consider(t, false);
           });
           if (certified)
             for (const std::array<std::uint32_t, 8>& corner : cubes.cubes()) {
@@ -793,7 +789,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         }
         ++count.windows;
         count.points += tri_points.size();
-        count.in_cubes += cube_points.size();
+        count.in_cubes += members.size() - tri_points.size();
         if (!certified) {
           ++count.regrown;
           Window wider = window;

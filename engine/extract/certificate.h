@@ -9,7 +9,6 @@
 #include <vector>
 
 #include "engine/extract/delaunay.h"
-#include "engine/extract/flat_map.h"
 
 namespace sf::extract_detail {
 
@@ -48,21 +47,5 @@ enum class Certificate { kGlobal, kNotGlobal, kUnknown };
 // decides them.
 Certificate certify(const Ball& ball, const LatticePoint* cell_points[4], const std::int64_t lo[3],
                     const std::int64_t hi[3], const OutsidePoints& outside, const Occupancy& occ);
-
-// Points bucketed by grid cell (side 2^shift lattice units), to find those in a ball.
-class PointGrid {
- public:
-  PointGrid(const std::vector<LatticePoint>& points, int shift);
-  bool empty() const { return points_.empty(); }
-  // True if a point lies inside the cell's circumsphere, on-sphere points decided by the
-  // triangulation's symbolic perturbation (lattice_side_of_sphere).
-  bool any_in_ball(const Ball& ball, const LatticePoint* cell_points[4]) const;
-
- private:
-  int shift_;
-  std::vector<LatticePoint> points_;   // by grid cell
-  std::vector<std::uint32_t> starts_;  // of each occupied cell's points, then points_.size()
-  FlatMap cell_at_;                    // packed cell -> index in starts_
-};
 
 }  // namespace sf::extract_detail

@@ -27,7 +27,6 @@ EmptyCubes::EmptyCubes(const std::vector<LatticePoint>& points, const std::vecto
     point_at.insert(cube_key(level[i], index_of(i, 0), index_of(i, 1), index_of(i, 2)), std::uint32_t(i));
     here |= 1u << level[i];
   }
-  const auto find = [&](std::uint64_t key) { return point_at.find(key); };
   // Per level l with finer voxels in the set: their cells on the grid of level l + 1.
   std::vector<std::vector<std::uint64_t>> finer(std::size_t(G) + 1);
   for (int l = 0; l < G; ++l) {
@@ -44,7 +43,7 @@ EmptyCubes::EmptyCubes(const std::vector<LatticePoint>& points, const std::vecto
     std::array<std::uint32_t, 8> corner;
     bool complete = true;
     for (int c = 0; c < 8 && complete; ++c) {
-      const std::int64_t j = c == 0 ? std::int64_t(i) : find(cube_key(l, x + (c & 1), y + (c >> 1 & 1), z + (c >> 2 & 1)));
+      const std::int64_t j = c == 0 ? std::int64_t(i) : point_at.find(cube_key(l, x + (c & 1), y + (c >> 1 & 1), z + (c >> 2 & 1)));
       complete = j >= 0;
       corner[c] = std::uint32_t(j);
     }
@@ -74,6 +73,7 @@ EmptyCubes::EmptyCubes(const std::vector<LatticePoint>& points, const std::vecto
     }
     cube_at_.insert(cube_key(l, x, y, z), std::uint32_t(corners_.size()));
     corners_.push_back(corner);
+    cube_levels_ |= 1u << l;
   }
   for (std::size_t i = 0; i < count; ++i) {
     const int l = level[i];
@@ -85,22 +85,25 @@ EmptyCubes::EmptyCubes(const std::vector<LatticePoint>& points, const std::vecto
   }
 }
 
-bool EmptyCubes::contains(const Tet& t) const {
-  const int l = level_[t[0]];
-  for (int k = 1; k < 4; ++k)
-    if (level_[t[k]] != l) return false;
-  const int shift = G_ - l;
-  std::int64_t lo[3], hi[3];
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = hi[a] = std::int64_t(points_[t[0]][a]) >> shift;
-    for (int k = 1; k < 4; ++k) {
-      const std::int64_t v = std::int64_t(points_[t[k]][a]) >> shift;
-      lo[a] = std::min(lo[a], v);
-      hi[a] = std::max(hi[a], v);
+bool EmptyCubes::covers(const LatticePoint& p0, const LatticePoint& p1, const LatticePoint& p2,
+                        const LatticePoint& p3) const {
+  std::int64_t c[3];  // 4 x the centroid
+  for (int a = 0; a < 3; ++a) c[a] = std::int64_t(p0[a]) + p1[a] + p2[a] + p3[a];
+  for (int l = 0; l <= G_; ++l) {
+    if (!(cube_levels_ >> l & 1)) continue;
+    // A centroid on a face, edge or corner of the level's cubes is in each cube sharing it.
+    const std::int64_t edge = std::int64_t{4} << (G_ - l);
+    std::int64_t lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      hi[a] = c[a] / edge;
+      lo[a] = c[a] % edge == 0 && hi[a] > 0 ? hi[a] - 1 : hi[a];
     }
-    if (hi[a] - lo[a] != 1) return false;  // a cell with volume spans its cube on every axis
+    for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
+      for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+        for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+          if (cube_at_.find(cube_key(l, x, y, z)) >= 0) return true;
   }
-  return cube_at_.find(cube_key(l, lo[0], lo[1], lo[2])) >= 0;
+  return false;
 }
 
 }  // namespace sf::extract_detail

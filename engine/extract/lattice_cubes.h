@@ -11,9 +11,14 @@
 // on the lexicographic order of the corners, the same in every cube): an empty cube.
 //
 // A voxel whose 8 surrounding cubes of its level are all empty cubes has every incident cell
-// inside them: it can stay out of the triangulation. The triangulation of the others holds every
-// other global cell (its ball is empty of all voxels, a fortiori of a subset); its cells that are
-// not global are those whose ball holds a left-out voxel (certificate.h: PointGrid).
+// inside them: it can stay out of the triangulation. The triangulation of the others (S') holds
+// every other global cell (its ball is empty of all voxels, a fortiori of a subset). Its cells
+// that are not global lie inside the empty cubes: inserting the left-out voxels replaces exactly
+// the cells in conflict with them, and the cells that replace them are the left-out voxels'
+// stars, cube cells; both sets tile the same region. A global cell that overlaps an empty cube is
+// one of its 6 cells (the cube is a Delaunay polytope). So a cell of S' is global and not a cube
+// cell iff its interior misses every empty cube, iff its centroid (an interior point) lies in no
+// closed empty cube (covers()). No ball is needed to tell them apart.
 #include <array>
 #include <cstdint>
 #include <functional>
@@ -43,8 +48,11 @@ class EmptyCubes {
   const std::vector<std::array<std::uint32_t, 8>>& cubes() const { return corners_; }
   // Point i's incident cells all lie in empty cubes.
   bool interior(std::size_t i) const { return interior_[i] != 0; }
-  // Is the cell (point indices) inside an empty cube?
-  bool contains(const Tet& t) const;
+  // Does the closed union of the empty cubes hold the centroid of the cell (point indices, positive
+  // volume)? For a cell of the triangulation of the non-interior points: it is then a cube's cell
+  // or not global; otherwise it is a global cell (see above).
+  bool covers(const Tet& t) const { return covers(points_[t[0]], points_[t[1]], points_[t[2]], points_[t[3]]); }
+  bool covers(const LatticePoint& a, const LatticePoint& b, const LatticePoint& c, const LatticePoint& d) const;
 
  private:
   const std::vector<LatticePoint>& points_;
@@ -52,6 +60,7 @@ class EmptyCubes {
   int G_;
   std::vector<std::array<std::uint32_t, 8>> corners_;
   FlatMap cube_at_;  // cube key (level, minimum corner) -> index in corners_
+  std::uint32_t cube_levels_ = 0;  // bit l: some empty cube of level l
   std::vector<std::uint8_t> interior_;
 };
 
