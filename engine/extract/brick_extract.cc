@@ -27,6 +27,7 @@
 #include "engine/error.h"
 #include "engine/extract/certificate.h"
 #include "engine/extract/delaunay.h"
+#include "engine/extract/flat_map.h"
 #include "engine/extract/lattice_cubes.h"
 #include "engine/extract/marching_tets.h"
 #include "engine/extract/voxel_set.h"
@@ -833,38 +834,46 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
         }
       }
       if (!owned.empty()) {
-        // The piece: the cells' voxels in key order, the cells re-indexed (orientation kept).
+        // The piece: the cells' voxels in key order, the cells re-indexed (orientation kept). A
+        // voxel is one object while X holds its brick: distinct by address first (no key reads),
+        // then in key order.
         std::vector<const SurfaceVoxel*> used;
+        used.reserve(4 * owned.size());
         for (const auto& c : owned) used.insert(used.end(), c.begin(), c.end());
-        const auto by_key = [](const SurfaceVoxel* p, const SurfaceVoxel* q) { return p->key < q->key; };
-        std::sort(used.begin(), used.end(), by_key);
-        used.erase(std::unique(used.begin(), used.end(), [](const SurfaceVoxel* p, const SurfaceVoxel* q) { return p->key == q->key; }),
-                   used.end());
+        std::sort(used.begin(), used.end(), std::less<const SurfaceVoxel*>());
+        used.erase(std::unique(used.begin(), used.end()), used.end());
+        std::sort(used.begin(), used.end(), [](const SurfaceVoxel* p, const SurfaceVoxel* q) { return p->key < q->key; });
+        FlatMap index_of(used.size());
+        const auto address = [](const SurfaceVoxel* p) { return std::uint64_t(reinterpret_cast<std::uintptr_t>(p)); };
         std::vector<SurfaceVoxel> piece(used.size());
-        for (std::size_t i = 0; i < used.size(); ++i) piece[i] = *used[i];
+        for (std::size_t i = 0; i < used.size(); ++i) {
+          piece[i] = *used[i];
+          index_of.insert(address(used[i]), std::uint32_t(i));
+        }
         std::vector<Tet> cells(owned.size());
         for (std::size_t c = 0; c < owned.size(); ++c)
-          for (int k = 0; k < 4; ++k)
-            cells[c][k] = std::uint32_t(std::lower_bound(used.begin(), used.end(), owned[c][k], by_key) - used.begin());
+          for (int k = 0; k < 4; ++k) cells[c][k] = std::uint32_t(index_of.find(address(owned[c][k])));
         piece_voxels.post(X.code, X.code, piece);
         piece_cells.post(X.code, X.code, cells);
         // The closest offer per voxel (ties: the lower other key), grouped by the voxel's brick.
-        std::sort(offered.begin(), offered.end(), [&](const SnapOffer& p, const SnapOffer& q) {
-          const std::uint64_t bp = m.brick_code_of_key(VoxelKey{p.target}), bq = m.brick_code_of_key(VoxelKey{q.target});
-          if (bp != bq) return bp < bq;
-          return p.target != q.target ? p.target < q.target
-                 : p.fraction_bits != q.fraction_bits ? p.fraction_bits < q.fraction_bits
-                                                      : p.other < q.other;
+        std::vector<std::pair<std::uint64_t, SnapOffer>> by_brick(offered.size());
+        for (std::size_t i = 0; i < offered.size(); ++i)
+          by_brick[i] = {m.brick_code_of_key(VoxelKey{offered[i].target}), offered[i]};
+        std::sort(by_brick.begin(), by_brick.end(), [](const auto& p, const auto& q) {
+          if (p.first != q.first) return p.first < q.first;
+          const SnapOffer &a = p.second, &b = q.second;
+          return a.target != b.target ? a.target < b.target
+                 : a.fraction_bits != b.fraction_bits ? a.fraction_bits < b.fraction_bits
+                                                      : a.other < b.other;
         });
-        offered.erase(std::unique(offered.begin(), offered.end(),
-                                  [](const SnapOffer& p, const SnapOffer& q) { return p.target == q.target; }),
-                      offered.end());
-        for (std::size_t i = 0; i < offered.size();) {
-          const std::uint64_t dest = m.brick_code_of_key(VoxelKey{offered[i].target});
+        by_brick.erase(std::unique(by_brick.begin(), by_brick.end(),
+                                   [](const auto& p, const auto& q) { return p.second.target == q.second.target; }),
+                       by_brick.end());
+        for (std::size_t i = 0; i < by_brick.size();) {
           std::size_t j = i;
-          while (j < offered.size() && m.brick_code_of_key(VoxelKey{offered[j].target}) == dest) ++j;
-          offers.post(dest, X.code,
-                      std::vector<SnapOffer>(offered.begin() + std::ptrdiff_t(i), offered.begin() + std::ptrdiff_t(j)));
+          std::vector<SnapOffer> to_brick;
+          for (; j < by_brick.size() && by_brick[j].first == by_brick[i].first; ++j) to_brick.push_back(by_brick[j].second);
+          offers.post(by_brick[i].first, X.code, to_brick);
           i = j;
         }
       }
