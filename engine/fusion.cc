@@ -321,6 +321,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     return item.frame.memory_bytes() + item.triangles.capacity() * sizeof(FrameTriangle);
   };
   IntegrateStats integ;
+  IntegrateScratch tables;  // the integrating stage's tables, reused depth map after depth map
   const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
   const std::atomic<bool>* stop = hooks.follow ? nullptr : hooks.stop;
   bool stopped = false;
@@ -382,7 +383,8 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
                   // triangles, and integration builds tables about as large again for the one it runs.
                   item_bytes_max = std::max(item_bytes_max, item_bytes(*item));
                   map.set_reserve((tokens + 1) * item_bytes_max);
-                  IntegrateStats s = integrate_frame(item->frame, item->triangles, root, options.integrate, map, region);
+                  IntegrateStats s =
+                      integrate_frame(item->frame, item->triangles, root, options.integrate, map, region, &tables);
                   char& first_time = counted[item->index - from];
                   if (first_time == 0) {
                     outside += item->late.outside;

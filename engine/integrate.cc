@@ -287,9 +287,9 @@ IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector
 
 IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
                                const RootCube& root, const IntegrateOptions& options, BrickMap& map,
-                               const BrickBox* region) {
+                               const BrickBox* region, IntegrateScratch* scratch) {
   IntegrateStats stats;
-  if (integrate_frame_projective(frame, triangles, root, options, map, &stats, region)) return stats;
+  if (integrate_frame_projective(frame, triangles, root, options, map, &stats, region, scratch)) return stats;
   return integrate_frame_prisms(frame, triangles, root, options, map, region);
 }
 

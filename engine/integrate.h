@@ -9,6 +9,7 @@
 // one contribution per depth map. That makes the accumulation order within a depth map irrelevant
 // and the fused field independent of thread timing.
 #include <cstddef>
+#include <memory>
 #include <vector>
 
 #include "engine/depth_frame.h"
@@ -49,6 +50,20 @@ struct IntegrateStats {
   void add(const IntegrateStats& o);
 };
 
+// The tables the voxel-centric enumeration builds for a depth map (about 60 MB for 500 x 375),
+// kept from one call to the next so that each depth map reuses the last one's memory: allocated
+// afresh (above malloc's mmap threshold) they cost a page fault per 4 KiB every time, and a
+// depth map is read once per plan tile that it reaches. For one caller at a time.
+class IntegrateScratch {
+ public:
+  IntegrateScratch();
+  ~IntegrateScratch();
+  IntegrateScratch(const IntegrateScratch&) = delete;
+  IntegrateScratch& operator=(const IntegrateScratch&) = delete;
+  struct Tables;
+  std::unique_ptr<Tables> tables;
+};
+
 // Integrates one depth map into `map`. Runs parallel (tbb::parallel_for) in the calling arena.
 // Uses the voxel-centric enumeration when the frame allows it (a perspective pixel grid), else
 // the prism enumeration; both give the same field.
@@ -56,7 +71,7 @@ struct IntegrateStats {
 // voxels outside get nothing, those inside exactly what the whole frame gives them).
 IntegrateStats integrate_frame(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
                                const RootCube& root, const IntegrateOptions& options, BrickMap& map,
-                               const BrickBox* region = nullptr);
+                               const BrickBox* region = nullptr, IntegrateScratch* scratch = nullptr);
 
 // The two enumerations, exposed for tests and benchmarks.
 // Prisms: per triangle and level, the voxels of the truncated prism its lines of sight sweep
@@ -70,7 +85,8 @@ IntegrateStats integrate_frame_prisms(const DepthFrame& frame, const std::vector
 // frame does not qualify.
 bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
                                 const RootCube& root, const IntegrateOptions& options, BrickMap& map,
-                                IntegrateStats* stats, const BrickBox* region = nullptr);
+                                IntegrateStats* stats, const BrickBox* region = nullptr,
+                                IntegrateScratch* scratch = nullptr);
 
 // Where a depth map can write, for planning (scheduler/tile_plan.h): every brick that any voxel
 // it integrates can lie in (a superset: integrate_frame writes nothing elsewhere), and its surface

@@ -127,6 +127,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   const Sensor& sensor = frame.sensor;
   if (sensor.kind != Sensor::Kind::Perspective || frame.width < 2 || frame.height < 2) return false;
   Prepared& p = *out;
+  p.stats = IntegrateStats{};
   p.frame = &frame;
   p.behind = options.behind;
   p.QW = frame.width - 1, p.QH = frame.height - 1;
@@ -436,10 +437,17 @@ bool has_prisms(const Prepared& p, int tile, int level) {
 
 }  // namespace
 
+struct IntegrateScratch::Tables {
+  Prepared prepared;
+};
+IntegrateScratch::IntegrateScratch() : tables(std::make_unique<Tables>()) {}
+IntegrateScratch::~IntegrateScratch() = default;
+
 bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
                                 const RootCube& root, const IntegrateOptions& options, BrickMap& map,
-                                IntegrateStats* stats_out, const BrickBox* region) {
-  Prepared p;
+                                IntegrateStats* stats_out, const BrickBox* region, IntegrateScratch* scratch) {
+  Prepared local;
+  Prepared& p = scratch ? scratch->tables->prepared : local;
   Eigen::AlignedBox3d region_box;
   if (region) region_box = world_box(*region, root, map.brick_level());
   if (!prepare(frame, triangles, root, options, region ? &region_box : nullptr, &p)) return false;
