@@ -1,6 +1,7 @@
 #include "storage/brick_map.h"
 
 #include <malloc.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <mutex>
@@ -203,8 +204,32 @@ void BrickMap::spill_all() {
   if (!store_) throw std::logic_error("BrickMap::spill_all without a tile store");
   // No malloc_trim here: the next tile reuses the freed heap, and returning it would only make the
   // kernel clear the same pages again.
+  std::vector<Brick*> resident;
   for (Brick* b : bricks())
-    if (b->resident) spill(*b);
+    if (b->resident) resident.push_back(b);
+  // Generations in brick order, as one spill after the other would number them; the tiles, each
+  // its own LZ4 block and file, are then written in parallel (at a plan tile's end every brick of
+  // the tile is written at once, and written one by one the other cores waited).
+  std::vector<std::uint64_t> generation(resident.size(), 0);
+  for (std::size_t i = 0; i < resident.size(); ++i)
+    if (resident[i]->dirty || resident[i]->generation == 0) generation[i] = next_generation_++;
+  tbb::parallel_for(std::size_t{0}, resident.size(), [&](std::size_t i) {
+    Brick& b = *resident[i];
+    if (generation[i] != 0) {
+      b.tile_bytes = store_->write(b.coord, generation[i], b.voxels);
+      if (b.generation != 0 && b.generation != b.checkpoint_generation) store_->remove(b.coord, b.generation);
+      b.generation = generation[i];
+      b.dirty = false;
+    }
+    b.field_bytes = resident_size(b);
+    b.voxels.clear();
+    b.resident = false;
+  });
+  for (std::size_t i = 0; i < resident.size(); ++i) {
+    if (generation[i] != 0) spill_.bytes_written += resident[i]->tile_bytes;
+    resident_bytes_ -= std::int64_t(resident[i]->field_bytes);
+    ++spill_.spilled;
+  }
 }
 
 std::vector<std::pair<BrickCoord, std::size_t>> BrickMap::field_bytes() const {
