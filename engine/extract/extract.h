@@ -90,7 +90,8 @@ struct ExtractStats {
   // triangulated over all windows (each voxel is in its own brick's windows and in the halos of
   // some others), windows redone with a wider halo because a sliver's circumsphere was too big to
   // certify, windows split in halves between their owners to fit the memory budget. tetrahedra
-  // and kept_tetrahedra then count the cells each brick owns in its windows.
+  // and kept_tetrahedra then count the cells each brick owns in its windows, less the triangulated
+  // cells inside empty cubes (lattice_cubes.h: a cube's, or not global).
   // window_cells_rejected: candidate cells a brick owned in its window that the certificate
   // showed not to be global (a voxel outside the window inside their circumsphere).
   // window_voxels_in_cubes: window voxels inside empty lattice cubes (lattice_cubes.h), whose
