@@ -121,14 +121,24 @@ void BrickMap::make_resident(Brick& b) {
   spill_.bytes_read += b.tile_bytes;
 }
 
-void BrickMap::write_tile_of(Brick& b) {
-  const std::uint64_t g = next_generation_++;
+void BrickMap::write_tile_as(Brick& b, std::uint64_t g) {
   b.tile_bytes = store_->write(b.coord, g, b.voxels);
-  spill_.bytes_written += b.tile_bytes;
   // The previous tile goes unless the committed checkpoint still needs it.
   if (b.generation != 0 && b.generation != b.checkpoint_generation) store_->remove(b.coord, b.generation);
   b.generation = g;
   b.dirty = false;
+}
+
+void BrickMap::write_tile_of(Brick& b) {
+  write_tile_as(b, next_generation_++);
+  spill_.bytes_written += b.tile_bytes;
+}
+
+void BrickMap::release(Brick& b) {
+  b.field_bytes = resident_size(b);
+  resident_bytes_ -= std::int64_t(b.field_bytes);
+  b.voxels.clear();
+  b.resident = false;
 }
 
 
@@ -193,10 +203,7 @@ void BrickMap::enforce_limit() {
 
 void BrickMap::spill(Brick& b) {
   if (b.dirty || b.generation == 0) write_tile_of(b);
-  b.field_bytes = resident_size(b);
-  resident_bytes_ -= std::int64_t(b.field_bytes);
-  b.voxels.clear();
-  b.resident = false;
+  release(b);
   ++spill_.spilled;
 }
 
@@ -214,20 +221,11 @@ void BrickMap::spill_all() {
   for (std::size_t i = 0; i < resident.size(); ++i)
     if (resident[i]->dirty || resident[i]->generation == 0) generation[i] = next_generation_++;
   tbb::parallel_for(std::size_t{0}, resident.size(), [&](std::size_t i) {
-    Brick& b = *resident[i];
-    if (generation[i] != 0) {
-      b.tile_bytes = store_->write(b.coord, generation[i], b.voxels);
-      if (b.generation != 0 && b.generation != b.checkpoint_generation) store_->remove(b.coord, b.generation);
-      b.generation = generation[i];
-      b.dirty = false;
-    }
-    b.field_bytes = resident_size(b);
-    b.voxels.clear();
-    b.resident = false;
+    if (generation[i] != 0) write_tile_as(*resident[i], generation[i]);
+    release(*resident[i]);
   });
   for (std::size_t i = 0; i < resident.size(); ++i) {
     if (generation[i] != 0) spill_.bytes_written += resident[i]->tile_bytes;
-    resident_bytes_ -= std::int64_t(resident[i]->field_bytes);
     ++spill_.spilled;
   }
 }

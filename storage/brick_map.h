@@ -165,6 +165,11 @@ class BrickMap {
   const Brick* find_brick(BrickCoord c) const;
   void make_resident(Brick& b);   // caller holds b.mutex
   void write_tile_of(Brick& b);   // caller holds b.mutex (or has exclusive access)
+  // Writes b's tile as generation g and drops the tile it replaces (no counters: thread-safe
+  // for distinct bricks).
+  void write_tile_as(Brick& b, std::uint64_t g);
+  // Drops b's field from memory (no spill counter).
+  void release(Brick& b);
   void spill(Brick& b);           // exclusive access
 
   int brick_level_;

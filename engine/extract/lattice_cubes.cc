@@ -1,7 +1,6 @@
 #include "engine/extract/lattice_cubes.h"
 
 #include <algorithm>
-#include <numeric>
 
 namespace sf::extract_detail {
 namespace {
@@ -18,7 +17,7 @@ std::uint64_t cell_key(std::int64_t x, std::int64_t y, std::int64_t z) { return 
 
 EmptyCubes::EmptyCubes(const std::vector<LatticePoint>& points, const std::vector<std::uint8_t>& level, int G,
                        std::uint32_t levels, const Holds& holds)
-    : points_(points), level_(level), G_(G), cube_at_(points.size()), interior_(points.size(), 0) {
+    : points_(points), G_(G), cube_at_(points.size()), interior_(points.size(), 0) {
   const std::size_t count = points.size();
   const auto index_of = [&](std::size_t i, int a) { return std::int64_t(points[i][a]) >> (G - level[i]); };
   FlatMap point_at(count);

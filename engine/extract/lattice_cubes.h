@@ -56,7 +56,6 @@ class EmptyCubes {
 
  private:
   const std::vector<LatticePoint>& points_;
-  const std::vector<std::uint8_t>& level_;
   int G_;
   std::vector<std::array<std::uint32_t, 8>> corners_;
   FlatMap cube_at_;  // cube key (level, minimum corner) -> index in corners_
