@@ -159,6 +159,9 @@ void print_summary(const FusionStats& s, const MeshCounts& mesh, const std::stri
 // Parameters that shape the integrated field: a job refuses to resume when they change.
 // (Regularization and extraction may change: they rerun from the job's tiles. octree.brick_size
 // only picks a new job's brick level, which the job records.)
+
+}  // namespace
+
 const std::vector<std::string> kIntegrationParameters = {"input.",        "triangulate.",   "integrate.",
                                                          "octree.bbox",   "octree.padding", "octree.brick_level"};
 
@@ -178,6 +181,8 @@ void write_text_atomically(const std::filesystem::path& path, const std::string&
   std::filesystem::rename(tmp, path);
 }
 
+namespace {
+
 // The job's copy of the mesh: a hard link to the output where the file system allows, else a copy.
 void link_into_job(const std::filesystem::path& output, const std::filesystem::path& job_mesh) {
   std::error_code ec;
@@ -188,9 +193,8 @@ void link_into_job(const std::filesystem::path& output, const std::filesystem::p
 
 }  // namespace
 
-void run_fuse(const FuseArgs& a) {
+FusionOptions fusion_options(const FuseArgs& a, ParameterSet& params) {
   FusionOptions options;
-  ParameterSet params;
   register_parameters(params, options);
   if (!a.config.empty()) {
     if (!std::filesystem::exists(a.config)) throw input_error(a.config, "config file not found");
@@ -211,6 +215,23 @@ void run_fuse(const FuseArgs& a) {
   for (const auto& s : a.sets) params.set_assignment(s);
   options.check();
   if (!a.quiet || a.print_params) std::fprintf(stderr, "effective parameters:\n%s", params.describe().c_str());
+  return options;
+}
+
+std::unique_ptr<FrameSource> open_inputs(const FuseArgs& a, const FusionOptions& options, std::string* input_abs) {
+  *input_abs = std::filesystem::absolute(a.input).string();
+  std::vector<std::unique_ptr<FrameSource>> parts;
+  parts.push_back(open_input(a.input, options.input));
+  for (const std::string& more : a.more_inputs) {
+    parts.push_back(open_input(more, options.input));
+    *input_abs += "\n" + std::filesystem::absolute(more).string();
+  }
+  return concatenate_inputs(std::move(parts));
+}
+
+void run_fuse(const FuseArgs& a) {
+  ParameterSet params;
+  const FusionOptions options = fusion_options(a, params);
   if (a.print_params) return;
 
   const int threads = a.threads > 0 ? a.threads : tbb::info::default_concurrency();
@@ -245,18 +266,16 @@ void run_fuse(const FuseArgs& a) {
       std::fprintf(stderr, "following %s: integrating depth maps as they complete; stop with: touch %s (or SIGTERM)\n",
                    input_abs.c_str(), std::filesystem::absolute(stop_file).c_str());
   } else {
-    std::vector<std::unique_ptr<FrameSource>> parts;
-    parts.push_back(open_input(a.input, options.input));
-    for (const std::string& more : a.more_inputs) {
-      parts.push_back(open_input(more, options.input));
-      input_abs += "\n" + std::filesystem::absolute(more).string();
-    }
-    source = concatenate_inputs(std::move(parts));
+    source = open_inputs(a, options, &input_abs);
   }
   job_options.memory_limit = a.memory_limit.empty() ? default_memory_limit() : parse_byte_size(a.memory_limit, "--memory-limit");
   job_options.checkpoint_every = a.checkpoint_every;
   job_options.checkpoint_seconds = a.checkpoint_seconds;
   job_options.allow_new_inputs = a.add;
+  if (a.tile) {
+    job_options.root = a.tile->root;
+    job_options.brick_level = a.tile->brick_level;
+  }
   if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_AFTER")) job_options.kill_after = std::strtoull(k, nullptr, 10);
   if (const char* k = std::getenv("SCALEFUSE_TEST_TERM_AFTER")) job_options.term_after = std::strtoull(k, nullptr, 10);
   if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_IN_EXTRACTION"))
@@ -295,7 +314,11 @@ void run_fuse(const FuseArgs& a) {
     hooks.follow = follow;
     // Past integration a signal ends the process as usual: the job is checkpointed.
     hooks.integrated = [&] { stop_signals.reset(); };
-    hooks.stop_after_integration = a.integrate_only;
+    hooks.stop_after_integration = a.integrate_only || a.tile.has_value();
+    if (a.tile) {
+      hooks.frames = &a.tile->frames;
+      hooks.region = &a.tile->region;
+    }
     // The mesh streams into the output (temporary name until complete); the extraction's scratch
     // files live in the job.
     NonEmptyPly ply(a.output, &mesh);
@@ -311,7 +334,7 @@ void run_fuse(const FuseArgs& a) {
                            g_signal.load());
     }
     printer.finish();
-    return !a.integrate_only;
+    return !hooks.stop_after_integration;
   };
   // An implicit job whose depth maps changed is started over (once); an explicit one is refused.
   std::optional<Job> job_holder;
@@ -337,6 +360,13 @@ void run_fuse(const FuseArgs& a) {
     std::ofstream(tmp) << stats_json(stats, mesh).dump(2) << "\n";
     std::filesystem::rename(tmp, a.stats_json);
   };
+  if (!extracted && a.tile) {
+    write_stats();
+    std::printf("tile %zu integrated: %zu depth maps into %zu bricks; when every tile is, merge with: scalefuse merge %s\n",
+                a.tile->tile, stats.depth_maps, Job::status(job.dir()).bricks,
+                std::filesystem::absolute(job.dir().parent_path().parent_path()).c_str());
+    return;
+  }
   if (!extracted) {
     write_stats();
     std::printf("integrated %zu depth maps (bricks of level %d); extract with: scalefuse resume %s\n", stats.depth_maps,
@@ -398,7 +428,20 @@ void add_fuse_command(CLI::App& app) {
   cmd->add_flag("--print-params", args->print_params, "print the effective parameters and exit");
   cmd->add_flag("--integrate-only", args->integrate_only,
                 "stop once every depth map is integrated and checkpointed; `scalefuse resume DIR` extracts");
-  cmd->callback([args] { run_fuse(*args); });
+  cmd->add_flag("--mpi", args->mpi,
+                "run as MPI ranks (mpirun -n P scalefuse fuse ... --mpi): plan --tiles N tiles in the --job "
+                "directory, ranks integrate them, rank 0 merges (docs/cluster.md)");
+  cmd->add_option("--tiles", args->tiles, "with --mpi: number of tiles (default: 4 per rank)")->check(CLI::PositiveNumber);
+  cmd->callback([args] {
+    if (args->mpi) {
+      if (args->follow || args->add || args->integrate_only)
+        throw InputError("fuse --mpi: --follow and --integrate-only do not apply");
+      run_fuse_mpi(*args, args->tiles);
+    } else {
+      if (args->tiles > 0) throw InputError("fuse: --tiles goes with --mpi (or use scalefuse plan)");
+      run_fuse(*args);
+    }
+  });
 }
 
 }  // namespace sf::cli

@@ -4,9 +4,15 @@
 // InputError to exit code 2 and everything else to 1.
 #include <CLI/CLI.hpp>
 
+#include <filesystem>
+#include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "engine/fusion.h"
+#include "engine/parameters.h"
 
 namespace sf::cli {
 
@@ -25,8 +31,41 @@ struct FuseArgs {
   double checkpoint_seconds = 300;
   bool quiet = false, print_params = false;
   bool integrate_only = false;           // stop after the integration's checkpoint (resume extracts)
+  // A cluster tile's run (scalefuse run-tile): only the plan's depth maps for the tile, only into
+  // its bricks, in the plan's octree; stops once integrated.
+  struct TileRun {
+    std::size_t tile = 0;
+    std::vector<std::size_t> frames;
+    BrickBox region;
+    RootCube root;
+    int brick_level = 0;
+  };
+  std::optional<TileRun> tile;
+  // fuse --mpi --tiles N: plan N tiles, run them on MPI ranks, merge (docs/cluster.md).
+  bool mpi = false;
+  std::size_t tiles = 0;
 };
 void run_fuse(const FuseArgs& args);
+
+// The fusion parameters of `args` (config file, shorthand flags, --set), checked; `params` holds
+// them by name afterwards. Prints them unless quiet.
+FusionOptions fusion_options(const FuseArgs& args, ParameterSet& params);
+// The input folders of `args` as one source; `input_abs` gets their absolute names, one per line.
+std::unique_ptr<FrameSource> open_inputs(const FuseArgs& args, const FusionOptions& options, std::string* input_abs);
+// Parameters that shape the integrated field (a job refuses to resume when they change).
+extern const std::vector<std::string> kIntegrationParameters;
+std::size_t default_memory_limit();
+void write_text_atomically(const std::filesystem::path& path, const std::string& text);
+// The cluster commands (cli/cmd_cluster.cc, docs/cluster.md). `options` carries the job options
+// (threads, memory limit, checkpoints, quiet, stats) of a tile's run or of the merge.
+void run_plan(const FuseArgs& args, std::size_t tiles);
+// tile < 0: from SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX.
+void run_tile(const std::string& job_dir, long tile, const FuseArgs& options);
+void run_merge(const std::string& job_dir, const std::string& output, const FuseArgs& options);
+// fuse --mpi (cli/mpi/fuse_mpi.cc; without MPI it throws InputError).
+void run_fuse_mpi(const FuseArgs& args, std::size_t tiles);
+// scalefuse resume DIR, with the output replaced when `output` is not empty.
+void rerun_job(const std::string& dir, FuseArgs args, const std::string& more, const std::string& output);
 
 // A job stopped by SIGINT/SIGTERM after checkpointing: main() prints the message and exits with
 // 128 + the signal number, as a shell expects of a process ended by that signal.
@@ -41,5 +80,6 @@ void add_fuse_command(CLI::App& app);
 void add_synth_command(CLI::App& app);
 void add_eval_command(CLI::App& app);
 void add_job_commands(CLI::App& app);  // resume, status
+void add_cluster_commands(CLI::App& app);  // plan, run-tile, merge, slurm
 
 }  // namespace sf::cli

@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   sf::cli::add_synth_command(app);
   sf::cli::add_eval_command(app);
   sf::cli::add_job_commands(app);
+  sf::cli::add_cluster_commands(app);
   try {
     sf::initialize_vdb();
     app.parse(argc, argv);

@@ -143,6 +143,63 @@ void sort_unique(std::vector<T>& v) {
   v.erase(std::unique(v.begin(), v.end()), v.end());
 }
 
+// What the first pass over the input learns: each depth map's identity (for a job), the bounds
+// of the valid samples, their count, and the finest footprint (each depth map's 5th percentile,
+// so a few stray near samples do not count), for octree.brick_level = auto.
+struct InputScan {
+  std::vector<FrameIdentity> identities;
+  Eigen::AlignedBox3d bounds;
+  std::size_t samples = 0;
+  double finest_footprint = std::numeric_limits<double>::infinity();
+};
+
+InputScan scan_input(const FrameSource& source, const std::vector<std::size_t>& frames,
+                     const std::optional<Eigen::AlignedBox3d>& clip, bool identities, const ProgressFn& progress) {
+  InputScan scan;
+  if (identities) scan.identities.resize(frames.size());
+  std::mutex mutex;
+  std::size_t scanned = 0;
+  tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t i) {
+    DepthFrame f = source.load(frames[i]);
+    if (identities) scan.identities[i] = identity_of(source, frames[i], f);
+    clip_to_box(f, clip);
+    Eigen::AlignedBox3d b;
+    std::vector<float> footprints;
+    footprints.reserve(f.size());
+    for (std::size_t k = 0; k < f.size(); ++k)
+      if (f.valid[k]) {
+        b.extend(f.position[k].cast<double>());
+        footprints.push_back(f.footprint[k]);
+      }
+    const std::size_t n = footprints.size();
+    double fine = std::numeric_limits<double>::infinity();
+    if (n) {
+      const auto at = footprints.begin() + std::ptrdiff_t(n / 20);
+      std::nth_element(footprints.begin(), at, footprints.end());
+      fine = *at;
+    }
+    std::lock_guard lock(mutex);
+    if (n) scan.bounds.extend(b);
+    scan.finest_footprint = std::min(scan.finest_footprint, fine);
+    scan.samples += n;
+    report(progress, "bounds", double(++scanned), double(frames.size()));
+  });
+  return scan;
+}
+
+// The brick level of a new job (see OctreeOptions).
+int choose_brick_level(const OctreeOptions& o, const IntegrateOptions& integrate, const RootCube& root,
+                       double finest_footprint) {
+  if (o.brick_level >= 0) return o.brick_level;
+  if (o.brick_size > 0) return std::clamp(int(std::ceil(std::log2(root.size / o.brick_size))), 0, 10);
+  return std::isfinite(finest_footprint) ? auto_brick_level(root, finest_footprint, integrate) : 4;
+}
+
+// Where one depth map can write (FrameReach), as integration sees it (clipped to the box).
+FrameReach reach_of(const DepthFrame& f, const FusionOptions& options, const RootCube& root, int brick_level) {
+  return frame_reach(f, triangulate(f, options.triangulate), root, options.integrate, brick_level);
+}
+
 // The plan of a sweep over depth maps [from, to) (scheduler/tile_plan.h): each depth map's reach
 // and surface cells; unless `progress` carries the job's recorded plan, new tiles cut from the
 // estimated field (recorded in `progress`); returns, per tile, the depth maps whose reach meets
@@ -151,7 +208,7 @@ template <typename LoadFrame>
 std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t to, LoadFrame&& load_frame,
                                                  const FusionOptions& options, const RootCube& root, const BrickMap& map,
                                                  const ProgressFn& progress_fn, IntegrationProgress& progress,
-                                                 FusionStats& stats) {
+                                                 FusionStats& stats, const BrickBox* region) {
   const int brick_level = map.brick_level();
   std::vector<std::vector<std::uint64_t>> reach_bricks(to - from);
   std::vector<VoxelKey> cells;
@@ -159,7 +216,14 @@ std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t t
   std::mutex cells_mutex;
   tbb::parallel_for(from, to, [&](std::size_t i) {
     const DepthFrame f = load_frame(i);
-    FrameReach r = frame_reach(f, triangulate(f, options.triangulate), root, options.integrate, brick_level);
+    FrameReach r = reach_of(f, options, root, brick_level);
+    if (region) {  // a cluster tile's run: only its bricks matter
+      const auto outside = [&](std::uint64_t id) { return !region->contains(BrickCoord::unpack(id)); };
+      r.bricks.erase(std::remove_if(r.bricks.begin(), r.bricks.end(), outside), r.bricks.end());
+      r.cells.erase(std::remove_if(r.cells.begin(), r.cells.end(),
+                                   [&](VoxelKey k) { return !region->contains(brick_of(k, brick_level)); }),
+                    r.cells.end());
+    }
     reach_bricks[i - from] = std::move(r.bricks);
     std::lock_guard lock(cells_mutex);
     cells.insert(cells.end(), r.cells.begin(), r.cells.end());
@@ -181,7 +245,7 @@ std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t t
     const auto estimate = estimate_brick_bytes(cells, brick_level, options.integrate, map.field_bytes(), touched);
     stats.plan_estimate_bytes = 0;
     for (const auto& e : estimate) stats.plan_estimate_bytes += e.second;
-    progress.tiles = cut_tiles(estimate, brick_level, 0.7 * double(map.memory_limit()));
+    progress.tiles = cut_tiles(estimate, brick_level, 0.7 * double(map.memory_limit()), region);
     progress.tile = progress.tile_frames = progress.steps = 0;
   }
   std::vector<std::vector<std::size_t>> tile_frames(progress.tiles.size());
@@ -200,6 +264,61 @@ std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t t
 }
 
 }  // namespace
+
+FusionPlan plan_fusion(const FrameSource& source, const FusionOptions& options, std::size_t n_tiles,
+                       const ProgressFn& progress) {
+  options.check();
+  if (n_tiles == 0) throw InputError("a plan needs at least one tile");
+  FusionPlan plan;
+  const std::size_t step = std::size_t(options.input.frame_step);
+  for (std::size_t i = 0; i < source.size(); i += step) plan.frames.push_back(i);
+  const auto clip = parse_bbox(options.octree.bbox);
+  InputScan scan = scan_input(source, plan.frames, clip, true, progress);
+  if (scan.samples == 0)
+    throw InputError("the input holds no valid depth samples" + std::string(clip ? " inside octree.bbox" : ""));
+  plan.identities = std::move(scan.identities);
+  plan.samples = scan.samples;
+  // As fuse() chooses them for a new job.
+  plan.root = clip ? root_cube_for(*clip, 0.0) : root_cube_for(scan.bounds, options.octree.padding);
+  plan.brick_level = choose_brick_level(options.octree, options.integrate, plan.root, scan.finest_footprint);
+
+  // Each depth map's reach; the field's bytes per brick estimated from the surface cells (the
+  // work of every later stage grows with them).
+  std::vector<std::vector<std::uint64_t>> reach(plan.frames.size());
+  std::vector<VoxelKey> cells;
+  std::size_t cells_unique = 0, planned = 0;
+  std::mutex mutex;
+  tbb::parallel_for(std::size_t(0), plan.frames.size(), [&](std::size_t i) {
+    DepthFrame f = source.load(plan.frames[i]);
+    clip_to_box(f, clip);
+    FrameReach r = reach_of(f, options, plan.root, plan.brick_level);
+    reach[i] = std::move(r.bricks);
+    std::lock_guard lock(mutex);
+    cells.insert(cells.end(), r.cells.begin(), r.cells.end());
+    if (cells.size() > 2 * cells_unique + (std::size_t{1} << 20)) {
+      sort_unique(cells);
+      cells_unique = cells.size();
+    }
+    report(progress, "plan", double(++planned), double(plan.frames.size()));
+  });
+  sort_unique(cells);
+  std::vector<std::uint64_t> touched;
+  for (const auto& b : reach) touched.insert(touched.end(), b.begin(), b.end());
+  sort_unique(touched);
+  const auto estimate = estimate_brick_bytes(cells, plan.brick_level, options.integrate, {}, touched);
+  plan.tiles = split_tiles(estimate, plan.brick_level, n_tiles);
+  plan.work.assign(plan.tiles.size(), 0.0);
+  for (const auto& [c, bytes] : estimate) plan.work[tile_of(plan.tiles, c)] += bytes;
+  plan.tile_frames.resize(plan.tiles.size());
+  std::vector<char> reaches(plan.tiles.size());
+  for (std::size_t i = 0; i < plan.frames.size(); ++i) {
+    std::fill(reaches.begin(), reaches.end(), 0);
+    for (std::uint64_t id : reach[i]) reaches[tile_of(plan.tiles, BrickCoord::unpack(id))] = 1;
+    for (std::size_t t = 0; t < plan.tiles.size(); ++t)
+      if (reaches[t]) plan.tile_frames[t].push_back(plan.frames[i]);
+  }
+  return plan;
+}
 
 Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats_out,
           FusionJournal* journal) {
@@ -225,42 +344,24 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     for (; source_seen < n; ++source_seen)
       if (source_seen % step == 0) frames.push_back(source_seen);
   };
-  take_new_frames();
+  if (hooks.frames) {  // a cluster tile's run: the plan's depth maps for the tile
+    if (hooks.follow) throw std::logic_error("fuse: FusionHooks::frames and follow exclude each other");
+    for (std::size_t i : *hooks.frames)
+      if (i >= source.size()) throw InputError("the plan names depth map " + std::to_string(i) + " of an input of " +
+                                               std::to_string(source.size()));
+    frames = *hooks.frames;
+    source_seen = source.size();
+  } else {
+    take_new_frames();
+  }
 
   // Pass 1: bounds of the data, so the root cube is no larger than the data needs, and each depth
   // map's identity for the job.
-  std::vector<FrameIdentity> identities(frames.size());
-  Eigen::AlignedBox3d bounds;
-  std::mutex bounds_mutex;
-  std::size_t samples = 0, bounded = 0;
-  // The finest footprint (each depth map's 5th percentile, so a few stray near samples do not
-  // count), for octree.brick_level = auto.
-  double finest_footprint = std::numeric_limits<double>::infinity();
-  tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t i) {
-    DepthFrame f = source.load(frames[i]);
-    if (journal) identities[i] = identity_of(source, frames[i], f);
-    clip_to_box(f, clip);
-    Eigen::AlignedBox3d b;
-    std::vector<float> footprints;
-    footprints.reserve(f.size());
-    for (std::size_t k = 0; k < f.size(); ++k)
-      if (f.valid[k]) {
-        b.extend(f.position[k].cast<double>());
-        footprints.push_back(f.footprint[k]);
-      }
-    const std::size_t n = footprints.size();
-    double fine = std::numeric_limits<double>::infinity();
-    if (n) {
-      const auto at = footprints.begin() + std::ptrdiff_t(n / 20);
-      std::nth_element(footprints.begin(), at, footprints.end());
-      fine = *at;
-    }
-    std::lock_guard lock(bounds_mutex);
-    if (n) bounds.extend(b);
-    finest_footprint = std::min(finest_footprint, fine);
-    samples += n;
-    report(hooks.progress, "bounds", double(++bounded), double(frames.size()));
-  });
+  InputScan scan = scan_input(source, frames, clip, journal != nullptr, hooks.progress);
+  std::vector<FrameIdentity>& identities = scan.identities;
+  const std::size_t samples = scan.samples;
+  const double finest_footprint = scan.finest_footprint;
+  const Eigen::AlignedBox3d& bounds = scan.bounds;
   if (samples == 0 && !hooks.follow)
     throw InputError("the input holds no valid depth samples" + std::string(clip ? " inside octree.bbox" : ""));
   if (samples == 0 && !clip)
@@ -279,12 +380,8 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   // budget, then streams each tile's depth maps through read -> triangulate (parallel) ->
   // integrate into the tile's bricks (in order).
   std::optional<int> job_brick_level = journal ? journal->fixed_brick_level() : std::nullopt;
-  const int brick_level = job_brick_level                      ? *job_brick_level
-                          : options.octree.brick_level >= 0    ? options.octree.brick_level
-                          : options.octree.brick_size > 0
-                              ? std::clamp(int(std::ceil(std::log2(root.size / options.octree.brick_size))), 0, 10)
-                          : std::isfinite(finest_footprint)    ? auto_brick_level(root, finest_footprint, options.integrate)
-                                                               : 4;
+  const int brick_level =
+      job_brick_level ? *job_brick_level : choose_brick_level(options.octree, options.integrate, root, finest_footprint);
   stats.brick_level = brick_level;
   BrickMap map(brick_level);
   IntegrationProgress progress = journal ? journal->begin(identities, root, map) : IntegrationProgress{};
@@ -334,7 +431,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
       std::vector<std::vector<std::size_t>> tile_frames;
       std::vector<char> counted(to - from, 0);  // triangles counted once per depth map
       if (!map.spills()) {
-        progress.tiles = {BrickBox::whole(brick_level)};
+        progress.tiles = {hooks.region ? *hooks.region : BrickBox::whole(brick_level)};
         tile_frames.resize(1);
         for (std::size_t i = from; i < to; ++i) tile_frames[0].push_back(i);
       } else {
@@ -344,7 +441,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
               LateSamples late;
               return load_frame(i, &late);
             },
-            options, root, map, hooks.progress, progress, stats);
+            options, root, map, hooks.progress, progress, stats, hooks.region);
         plan_seconds += std::chrono::duration<double>(Clock::now() - plan_start).count();
       }
       progress.sweep_end = to;
@@ -354,7 +451,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
       const bool one_tile = progress.tiles.size() == 1;
       for (; progress.tile < progress.tiles.size() && !stopped; ++progress.tile, progress.tile_frames = 0) {
         const std::vector<std::size_t>& list = tile_frames[progress.tile];
-        const BrickBox* region = one_tile ? nullptr : &progress.tiles[progress.tile];
+        const BrickBox* region = one_tile ? hooks.region : &progress.tiles[progress.tile];
         std::size_t next = progress.tile_frames;
         tbb::parallel_pipeline(
             tokens,

@@ -98,6 +98,12 @@ struct FusionHooks {
   // A folder for the extraction's scratch files (e.g. in the job directory); empty: a temporary
   // folder. Emptied when the extraction ends.
   std::filesystem::path scratch;
+  // A cluster tile's run (scheduler/cluster.h): fuse only these depth maps (source indices, in
+  // input order; input.frame_step is not applied) ...
+  const std::vector<std::size_t>* frames = nullptr;
+  // ... and integrate only into this box of bricks (the voxels of other bricks get nothing; those
+  // inside exactly what a run over every depth map gives them). Use with stop_after_integration.
+  const BrickBox* region = nullptr;
   // Return an empty mesh once the integration is checkpointed (fuse --integrate-only); the stats
   // then hold the integration's figures and the fused voxels per level.
   bool stop_after_integration = false;
@@ -172,6 +178,23 @@ class FusionJournal {
 // integration resumes from, and checkpoints into, the journal's job.
 Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionHooks& hooks, FusionStats* stats,
           FusionJournal* journal = nullptr);
+
+// A cluster run's plan (docs/cluster.md): the octree a single-machine run of the same input and
+// parameters uses (so that the meshes are the same), the brick grid split into tiles of about equal
+// estimated work, and per tile the depth maps whose reach (frame_reach) meets it.
+struct FusionPlan {
+  RootCube root;
+  int brick_level = 0;
+  std::vector<std::size_t> frames;          // source indices fused (input.frame_step), in input order
+  std::vector<FrameIdentity> identities;    // of each of `frames`
+  std::size_t samples = 0;
+  std::vector<BrickBox> tiles;              // a partition of the brick grid (some may be empty)
+  std::vector<double> work;                 // per tile: the estimated bytes of its field
+  std::vector<std::vector<std::size_t>> tile_frames;  // per tile: source indices, in input order
+};
+// Reads every depth map twice (bounds, then reach). Throws InputError on bad input.
+FusionPlan plan_fusion(const FrameSource& source, const FusionOptions& options, std::size_t tiles,
+                       const ProgressFn& progress);
 
 // octree.brick_level = auto: the finest insertion level of the data minus 8, in [3, 10].
 int auto_brick_level(const RootCube& root, double finest_footprint, const IntegrateOptions& integrate);

@@ -346,14 +346,80 @@ static RootCube parse_root(const std::string& text, const std::string& where) {
 std::optional<RootCube> Job::fixed_root() const {
   const std::string where = options_.dir.string();
   const std::string text = meta(db_, "root", where);
-  if (text.empty()) return std::nullopt;
+  if (text.empty()) return options_.root;
   return parse_root(text, where);
 }
 
 std::optional<int> Job::fixed_brick_level() const {
   const std::string text = meta(db_, "brick_level", options_.dir.string());
-  if (text.empty()) return std::nullopt;
+  if (text.empty()) return options_.brick_level;
   return std::stoi(text);
+}
+
+Job::Field Job::field(const std::filesystem::path& dir) {
+  const std::filesystem::path file = dir / "job.sqlite";
+  if (!std::filesystem::exists(file)) throw InputError(dir.string() + ": not a scalefuse job directory (no job.sqlite)");
+  sqlite3* db = open_db(file, false);
+  Field f;
+  try {
+    const std::string where = file.string();
+    Statement s(db, "SELECT bx, by, bz, generation, bytes FROM manifest ORDER BY bz, by, bx", where);
+    const TileStore names(dir / "tiles");
+    while (s.step()) {
+      ManifestEntry e;
+      e.coord = {std::uint32_t(s.integer(0)), std::uint32_t(s.integer(1)), std::uint32_t(s.integer(2))};
+      e.generation = std::uint64_t(s.integer(3));
+      e.bytes = std::uint64_t(s.integer(4));
+      f.manifest.push_back(e);
+      f.tiles.push_back(names.path(e.coord, e.generation));
+    }
+    const std::string g = meta(db, "max_generation", where);
+    f.max_generation = g.empty() ? 0 : std::stoull(g);
+  } catch (...) {
+    sqlite3_close(db);
+    throw;
+  }
+  sqlite3_close(db);
+  return f;
+}
+
+void Job::adopt(const std::vector<Field>& fields, std::size_t depth_maps) {
+  const std::string where = options_.dir.string();
+  if (meta_count(db_, "integrated", where) != 0 || !meta(db_, "sweep_tiles", where).empty())
+    throw InputError(where + ": this job has integrated depth maps itself; merge takes a job made by scalefuse plan");
+  std::set<std::uint64_t> seen;
+  std::uint64_t max_generation = 0;
+  for (const Field& f : fields) {
+    max_generation = std::max(max_generation, f.max_generation);
+    for (std::size_t i = 0; i < f.manifest.size(); ++i) {
+      const ManifestEntry& e = f.manifest[i];
+      if (!seen.insert(e.coord.packed()).second)
+        throw InputError(f.tiles[i].string() + ": brick (" + std::to_string(e.coord.x) + ", " + std::to_string(e.coord.y) +
+                         ", " + std::to_string(e.coord.z) + ") is in the fields of two tiles");
+      if (!std::filesystem::exists(f.tiles[i])) throw InputError(f.tiles[i].string() + ": tile of a checkpoint is missing");
+      const std::filesystem::path to = store_->path(e.coord, e.generation);
+      std::error_code ec;
+      std::filesystem::remove(to, ec);
+      std::filesystem::create_hard_link(f.tiles[i], to, ec);
+      if (ec) std::filesystem::copy_file(f.tiles[i], to, std::filesystem::copy_options::overwrite_existing);
+    }
+  }
+  store_->sync();
+  Transaction t(db_, where);
+  exec(db_, "DELETE FROM manifest", where);
+  Statement ins(db_, "INSERT INTO manifest(bx, by, bz, generation, bytes) VALUES(?1, ?2, ?3, ?4, ?5)", where);
+  for (const Field& f : fields)
+    for (const ManifestEntry& e : f.manifest) {
+      ins.bind(1, e.coord.x).bind(2, e.coord.y).bind(3, e.coord.z).bind(4, std::int64_t(e.generation));
+      ins.bind(5, std::int64_t(e.bytes)).run();
+    }
+  set_meta(db_, "integrated", std::to_string(depth_maps), where);
+  for (const char* key : {"sweep_end", "sweep_tile", "sweep_tile_frames", "sweep_steps"}) set_meta(db_, key, "0", where);
+  set_meta(db_, "sweep_tiles", "", where);
+  set_meta(db_, "max_generation", std::to_string(max_generation), where);
+  set_meta(db_, "stage", "integrated", where);
+  set_meta(db_, "checkpoint_time", utc_now(), where);
+  t.commit();
 }
 
 IntegrationProgress Job::begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) {

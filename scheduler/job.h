@@ -54,6 +54,9 @@ struct JobOptions {
   // fuse --follow: the input grows while the job runs (implies allow_new_inputs); recorded so
   // that `scalefuse resume` keeps the job's order of depth maps.
   bool follow = false;
+  // A cluster tile's job (scheduler/cluster.h): the octree fixed by the plan, for a new job too.
+  std::optional<RootCube> root;
+  std::optional<int> brick_level;
 };
 
 struct JobStatus {
@@ -107,6 +110,20 @@ class Job : public FusionJournal {
   static std::vector<std::string> recorded_inputs(const std::filesystem::path& dir);
   // The configuration, input and output a job was started with (for `scalefuse resume`).
   static JobStatus recorded(const std::filesystem::path& dir, std::string* config);
+  // The bricks of a job's last checkpoint and the tiles holding them (paths), and its highest
+  // tile generation.
+  struct Field {
+    std::vector<ManifestEntry> manifest;
+    std::vector<std::filesystem::path> tiles;
+    std::uint64_t max_generation = 0;
+  };
+  static Field field(const std::filesystem::path& dir);
+
+  // Makes the union of other jobs' fields (each brick in one of them) this job's integrated field:
+  // their tiles are linked (copied where the file system cannot link) into this job's folder and
+  // synced, then one transaction records them as the checkpoint of all `depth_maps` integrated.
+  // For a job that has integrated nothing yet (a cluster plan's, before `scalefuse merge`).
+  void adopt(const std::vector<Field>& fields, std::size_t depth_maps);
 
  private:
   void checkpoint(BrickMap& map, const char* stage);

@@ -31,7 +31,19 @@ std::vector<std::pair<BrickCoord, double>> estimate_brick_bytes(
 // `target` (a single brick may exceed it), by recursive bisection of the longest occupied axis at
 // the weighted median. Every brick of the grid lies in exactly one box; boxes come in a
 // spatially coherent order (left before right); boxes holding none of `bricks` are left out.
-std::vector<BrickBox> cut_tiles(std::vector<std::pair<BrickCoord, double>> bricks, int brick_level, double target);
+// With `within`, the boxes cut that box instead of the grid (every brick given must lie in it).
+std::vector<BrickBox> cut_tiles(std::vector<std::pair<BrickCoord, double>> bricks, int brick_level, double target,
+                                const BrickBox* within = nullptr);
+
+// Cuts the grid into exactly `n` boxes of about equal estimated work (the weights of `bricks`):
+// recursive bisection of the longest occupied axis, each cut placed where the work before it is
+// closest to the share of the boxes on that side. Every brick of the grid lies in exactly one box
+// (the cluster plan's tiles, docs/cluster.md); with fewer occupied bricks than `n`, some boxes are
+// empty (lo == hi). Deterministic for a given input, whatever its order.
+std::vector<BrickBox> split_tiles(std::vector<std::pair<BrickCoord, double>> bricks, int brick_level, std::size_t n);
+
+// True if the box holds no brick.
+bool empty_box(const BrickBox& b);
 
 // The tile holding a brick, or tiles.size() if none.
 std::size_t tile_of(const std::vector<BrickBox>& tiles, BrickCoord c);

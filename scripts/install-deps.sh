@@ -11,4 +11,5 @@ $SUDO apt-get install -y -qq --no-install-recommends \
   libopenvdb-dev libboost-iostreams-dev libboost-system-dev libblosc-dev \
   libtbb-dev liblz4-dev libpng-dev libjpeg-dev libsqlite3-dev \
   libcli11-dev nlohmann-json3-dev libtomlplusplus-dev \
-  libgtest-dev python3 >/dev/null
+  libgtest-dev python3 \
+  openmpi-bin libopenmpi-dev slurmctld slurmd slurm-client munge >/dev/null

@@ -123,6 +123,77 @@ TEST(TilePlan, EveryBrickLiesInExactlyOneTileWithinTheTarget) {
   for (double l : load) EXPECT_LE(l, 40.0);
 }
 
+TEST(TilePlan, SplitsIntoExactlyNTilesOfEqualWork) {
+  // Four bricks along x with work 1, 1, 1, 3 into 2 tiles: the share is 3, reached exactly by
+  // cutting before x = 3 (left 3, right 3), not at the middle coordinate.
+  std::vector<std::pair<BrickCoord, double>> row = {{{0, 4, 4}, 1.0}, {{1, 4, 4}, 1.0}, {{2, 4, 4}, 1.0}, {{3, 4, 4}, 3.0}};
+  std::vector<BrickBox> two = split_tiles(row, 3, 2);
+  ASSERT_EQ(two.size(), 2u);
+  EXPECT_EQ(two[0].lo.x, 0u);
+  EXPECT_EQ(two[0].hi.x, 3u);
+  EXPECT_EQ(two[1].lo.x, 3u);
+  EXPECT_EQ(two[1].hi.x, 8u);
+  // 3 tiles: 1 left (share 2: cut at x = 2, work 2), 2 right ({x 2} work 1 and {x 3} work 3).
+  std::vector<BrickBox> three = split_tiles(row, 3, 3);
+  ASSERT_EQ(three.size(), 3u);
+  EXPECT_EQ(three[0].hi.x, 2u);
+  EXPECT_EQ(three[1].lo.x, 2u);
+  EXPECT_EQ(three[1].hi.x, 3u);
+  EXPECT_EQ(three[2].lo.x, 3u);
+  // More tiles than occupied bricks: the rest are empty boxes, and still every brick has one tile.
+  std::vector<BrickBox> many = split_tiles(row, 3, 6);
+  ASSERT_EQ(many.size(), 6u);
+  int empty = 0;
+  for (const BrickBox& b : many) empty += empty_box(b);
+  EXPECT_EQ(empty, 2);
+  // The order of the input does not matter.
+  std::vector<std::pair<BrickCoord, double>> reversed(row.rbegin(), row.rend());
+  const std::vector<BrickBox> again = split_tiles(reversed, 3, 3);
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(again[i].lo.packed(), three[i].lo.packed());
+    EXPECT_EQ(again[i].hi.packed(), three[i].hi.packed());
+  }
+}
+
+TEST(TilePlan, SplitTilesPartitionTheGridAndBalanceTheWork) {
+  std::vector<std::pair<BrickCoord, double>> bricks;
+  double total = 0;
+  for (std::uint32_t z = 0; z < 16; ++z)
+    for (std::uint32_t y = 0; y < 16; ++y)
+      for (std::uint32_t x = 0; x < 16; ++x)
+        if ((x * 7 + y * 3 + z * 5) % 4 == 0) {
+          const double w = 1.0 + (x < 4 ? 20.0 : 0.0);  // a dense corner: balance by work, not by volume
+          bricks.push_back({{x, y, z}, w});
+          total += w;
+        }
+  for (std::size_t n : {1u, 2u, 3u, 5u, 8u}) {
+    const std::vector<BrickBox> tiles = split_tiles(bricks, 4, n);
+    ASSERT_EQ(tiles.size(), n);
+    std::vector<double> load(n, 0.0);
+    for (std::uint32_t z = 0; z < 16; ++z)
+      for (std::uint32_t y = 0; y < 16; ++y)
+        for (std::uint32_t x = 0; x < 16; ++x) {
+          int holders = 0;
+          for (const BrickBox& t : tiles) holders += t.contains({x, y, z});
+          ASSERT_EQ(holders, 1) << "brick " << x << " " << y << " " << z << ", " << n << " tiles";
+        }
+    for (const auto& [c, w] : bricks) load[tile_of(tiles, c)] += w;
+    for (double l : load) EXPECT_NEAR(l, total / double(n), 0.15 * total / double(n)) << n << " tiles";
+  }
+}
+
+TEST(TilePlan, CutsWithinARegion) {
+  const BrickBox region{{4, 0, 0}, {8, 8, 8}};
+  std::vector<std::pair<BrickCoord, double>> bricks = {{{4, 1, 1}, 2.0}, {{7, 1, 1}, 2.0}};
+  const std::vector<BrickBox> tiles = cut_tiles(bricks, 3, 2.0, &region);
+  ASSERT_EQ(tiles.size(), 2u);
+  for (const BrickBox& t : tiles) {
+    EXPECT_GE(t.lo.x, 4u);
+    EXPECT_LE(t.hi.x, 8u);
+  }
+  EXPECT_EQ(tile_of(tiles, {3, 1, 1}), tiles.size());  // outside the region
+}
+
 TEST(TilePlan, IntegratingTileByTileGivesTheWholeFieldAndReachCoversIt) {
   const DepthFrame f = wavy_frame();
   const auto tris = triangulate(f, {});
