@@ -318,6 +318,7 @@ void run_fuse(const FuseArgs& a) {
     if (a.tile) {
       hooks.frames = &a.tile->frames;
       hooks.region = &a.tile->region;
+      hooks.count_fused_voxels = false;
     }
     // The mesh streams into the output (temporary name until complete); the extraction's scratch
     // files live in the job.

@@ -554,7 +554,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
   stats.times.back().seconds -= plan_seconds;
   if (hooks.integrated) hooks.integrated();
   if (hooks.stop_after_integration) {
-    stats.voxels_fused = map.live_voxels_per_level();  // brick by brick, within the budget
+    if (hooks.count_fused_voxels) stats.voxels_fused = map.live_voxels_per_level();  // brick by brick, within the budget
     stats.peak_rss_bytes = peak_rss_bytes();
     if (stats_out) *stats_out = stats;
     return Mesh{};

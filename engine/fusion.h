@@ -105,8 +105,10 @@ struct FusionHooks {
   // inside exactly what a run over every depth map gives them). Use with stop_after_integration.
   const BrickBox* region = nullptr;
   // Return an empty mesh once the integration is checkpointed (fuse --integrate-only); the stats
-  // then hold the integration's figures and the fused voxels per level.
+  // then hold the integration's figures and, with count_fused_voxels, the fused voxels per level
+  // (which reads every spilled brick back: a cluster tile's run leaves that to the merge).
   bool stop_after_integration = false;
+  bool count_fused_voxels = true;
 };
 
 // fuse() was stopped through FusionHooks::stop; the journal holds a checkpoint.

@@ -36,8 +36,9 @@ std::vector<BrickBox> cut_tiles(std::vector<std::pair<BrickCoord, double>> brick
                                 const BrickBox* within = nullptr);
 
 // Cuts the grid into exactly `n` boxes of about equal estimated work (the weights of `bricks`):
-// recursive bisection of the longest occupied axis, each cut placed where the work before it is
-// closest to the share of the boxes on that side. Every brick of the grid lies in exactly one box
+// recursive bisection, each cut placed where the work before it is closest to the share of the
+// boxes on that side, across the longest occupied axis unless another axis balances the sides
+// better by more than 2 % of the work. Every brick of the grid lies in exactly one box
 // (the cluster plan's tiles, docs/cluster.md); with fewer occupied bricks than `n`, some boxes are
 // empty (lo == hi). Deterministic for a given input, whatever its order.
 std::vector<BrickBox> split_tiles(std::vector<std::pair<BrickCoord, double>> bricks, int brick_level, std::size_t n);

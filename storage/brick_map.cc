@@ -1,7 +1,9 @@
 #include "storage/brick_map.h"
 
 #include <malloc.h>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <mutex>
@@ -170,11 +172,21 @@ VoxelTable BrickMap::take_field(Brick& b) {
 }
 
 std::array<std::size_t, kMaxLevel + 1> BrickMap::live_voxels_per_level() const {
-  std::array<std::size_t, kMaxLevel + 1> n{};
-  VoxelTable scratch(brick_level_);
-  for (Brick* b : bricks())
-    field_of(*b, scratch).for_each([&](VoxelKey k, const VoxelData&) { ++n[std::size_t(k.level())]; });
-  return n;
+  using Counts = std::array<std::size_t, kMaxLevel + 1>;
+  const std::vector<Brick*> all = bricks();
+  // Spilled bricks are read back from their tiles: in parallel, each thread with its own scratch.
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, all.size(), 16), Counts{},
+      [&](const tbb::blocked_range<std::size_t>& r, Counts n) {
+        VoxelTable scratch(brick_level_);
+        for (std::size_t i = r.begin(); i != r.end(); ++i)
+          field_of(*all[i], scratch).for_each([&](VoxelKey k, const VoxelData&) { ++n[std::size_t(k.level())]; });
+        return n;
+      },
+      [](Counts a, const Counts& b) {
+        for (std::size_t l = 0; l < a.size(); ++l) a[l] += b[l];
+        return a;
+      });
 }
 
 void BrickMap::enforce_limit() {

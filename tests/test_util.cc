@@ -13,8 +13,29 @@
 
 namespace sf::test {
 
+namespace {
+
+std::filesystem::path scratch_root() {
+  return std::filesystem::temp_directory_path() / ("scalefuse-test-" + std::to_string(::getpid()));
+}
+
+// The process's scratch folders go when its tests pass (a failure keeps them for a look): a suite
+// run leaves gigabytes of jobs and meshes otherwise.
+class RemoveScratchWhenPassed : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    if (::testing::UnitTest::GetInstance()->failed_test_count() > 0) return;
+    std::error_code ec;
+    std::filesystem::remove_all(scratch_root(), ec);
+  }
+};
+[[maybe_unused]] ::testing::Environment* const kRemoveScratch =
+    ::testing::AddGlobalTestEnvironment(new RemoveScratchWhenPassed);
+
+}  // namespace
+
 std::filesystem::path scratch_dir(const std::string& name) {
-  auto dir = std::filesystem::temp_directory_path() / ("scalefuse-test-" + std::to_string(::getpid())) / name;
+  auto dir = scratch_root() / name;
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;

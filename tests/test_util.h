@@ -6,7 +6,8 @@
 
 namespace sf::test {
 
-// A fresh, empty folder under the system temp dir, unique to this process and name.
+// A fresh, empty folder under the system temp dir, unique to this process and name; the
+// process's folders are removed at its end if all its tests passed.
 std::filesystem::path scratch_dir(const std::string& name);
 // ../shared/data next to the repository (CI has it beside the clone).
 std::filesystem::path shared_data();
