@@ -156,12 +156,11 @@ void print_summary(const FusionStats& s, const MeshCounts& mesh, const std::stri
   std::printf("mesh written to %s\n", std::filesystem::absolute(output).string().c_str());
 }
 
+}  // namespace
+
 // Parameters that shape the integrated field: a job refuses to resume when they change.
 // (Regularization and extraction may change: they rerun from the job's tiles. octree.brick_size
 // only picks a new job's brick level, which the job records.)
-
-}  // namespace
-
 const std::vector<std::string> kIntegrationParameters = {"input.",        "triangulate.",   "integrate.",
                                                          "octree.bbox",   "octree.padding", "octree.brick_level"};
 

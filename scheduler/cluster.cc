@@ -75,7 +75,14 @@ void write_cluster_plan(const std::filesystem::path& dir, const ClusterPlan& pla
   const std::string text = j.dump(1) + "\n";
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) throw input_error(tmp.string(), std::string("cannot write: ") + std::strerror(errno));
-  const bool ok = ::write(fd, text.data(), text.size()) == ssize_t(text.size()) && ::fsync(fd) == 0;
+  std::size_t written = 0;
+  while (written < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + written, text.size() - written);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    written += std::size_t(n);
+  }
+  const bool ok = written == text.size() && ::fsync(fd) == 0;
   ::close(fd);
   if (!ok) throw input_error(tmp.string(), "cannot write the plan");
   std::filesystem::rename(tmp, path);
@@ -112,6 +119,8 @@ ClusterPlan read_cluster_plan(const std::filesystem::path& dir) {
       tile.box = {coord_of(t.at("lo")), coord_of(t.at("hi"))};
       for (std::uint32_t v : {tile.box.hi.x, tile.box.hi.y, tile.box.hi.z})
         if (v > grid) throw std::runtime_error("a tile reaches past the brick grid");
+      if (tile.box.lo.x > tile.box.hi.x || tile.box.lo.y > tile.box.hi.y || tile.box.lo.z > tile.box.hi.z)
+        throw std::runtime_error("a tile's lo exceeds its hi");
       tile.work = t.at("work_bytes").get<double>();
       tile.frames = t.at("frames").get<std::vector<std::size_t>>();
       if (t.at("tile").get<std::size_t>() != plan.tiles.size()) throw std::runtime_error("tiles out of order");

@@ -162,10 +162,14 @@ TEST(Cluster, SlurmScriptsChainTheMergeAfterEveryTile) {
   EXPECT_NE(submit.find("--dependency=afterok:$tiles --kill-on-invalid-dep=yes merge.sbatch"), std::string::npos) << submit;
   for (const char* f : {"tiles.sbatch", "merge.sbatch", "submit.sh"})
     EXPECT_EQ(test::run_command("bash -n " + (job / "slurm" / f).string()), 0) << f << " is not valid shell";
-  // Without a plan there is nothing to submit.
+  // Without a plan there is nothing to submit; a damaged plan is named.
   const CliRun none = scalefuse("slurm " + dir.string());
   EXPECT_EQ(none.code, 2);
   EXPECT_NE(none.output.find("plan.json"), std::string::npos) << none.output;
+  test::write_text(dir / "broken" / "plan.json", "{\"version\": 1, \"root\": ");
+  const CliRun broken = scalefuse("run-tile " + (dir / "broken").string() + " --tile 0");
+  EXPECT_EQ(broken.code, 2);
+  EXPECT_NE(broken.output.find("plan.json: malformed plan"), std::string::npos) << broken.output;
 }
 
 }  // namespace sf

@@ -90,16 +90,15 @@ void run_fuse_mpi(const FuseArgs& a, std::size_t tiles) {
   const std::size_t n = read_cluster_plan(job).tiles.size();
 
   // 2. Tiles: rank 0 hands them out; each other rank asks for one, runs it, reports, asks again.
-  std::vector<std::string> failures;
+  std::vector<Outcome> failures;  // "tile K failed on rank R: why", with the tile's outcome code
   if (mpi.size == 1) {
     for (std::size_t k = 0; k < n && failures.empty(); ++k) {
       const Outcome o = attempt([&] { run_tile(job, long(k), tile_args); });
-      if (o.code != 0) failures.push_back("tile " + std::to_string(k) + " failed on rank 0: " + o.message);
+      if (o.code != 0) failures.push_back({o.code, "tile " + std::to_string(k) + " failed on rank 0: " + o.message});
     }
   } else if (mpi.rank == 0) {
     std::size_t next = 0;
     int active = mpi.size - 1;
-    std::vector<long> running(std::size_t(mpi.size), -1);
     while (active > 0) {
       int report[2];  // tile (-1: none yet), outcome code
       MPI_Status st;
@@ -110,16 +109,15 @@ void run_fuse_mpi(const FuseArgs& a, std::size_t tiles) {
         MPI_Recv(&len, 1, MPI_INT, from, kTagMessage, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
         std::string message(std::size_t(len), '\0');
         if (len > 0) MPI_Recv(message.data(), len, MPI_CHAR, from, kTagMessage, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-        failures.push_back("tile " + std::to_string(report[0]) + " failed on rank " + std::to_string(from) + ": " +
-                           message);
-        std::fprintf(stderr, "mpi: %s\n", failures.back().c_str());
+        failures.push_back({report[1], "tile " + std::to_string(report[0]) + " failed on rank " + std::to_string(from) +
+                                           ": " + message});
+        std::fprintf(stderr, "mpi: %s\n", failures.back().message.c_str());
       }
       // After a failure no new tile starts: the merge cannot run, and the others' work is kept
       // (their tiles are checkpointed) for a rerun.
       int tile = -1;
       if (failures.empty() && next < n) tile = int(next++);
       MPI_Send(&tile, 1, MPI_INT, from, kTagTile, MPI_COMM_WORLD);
-      running[std::size_t(from)] = tile;
       if (tile < 0) --active;
       else if (!a.quiet) std::fprintf(stderr, "mpi: rank %d runs tile %d of %zu\n", from, tile, n);
     }
@@ -145,8 +143,12 @@ void run_fuse_mpi(const FuseArgs& a, std::size_t tiles) {
   // 3. Rank 0 merges when every tile is integrated; the others finalize (and wait there).
   Outcome tiles_done;
   if (mpi.rank == 0 && !failures.empty()) {
-    tiles_done.code = 1;
-    for (const std::string& f : failures) tiles_done.message += (tiles_done.message.empty() ? "" : "; ") + f;
+    // Bad input (2) only if every failure was bad input; else an internal error (1).
+    tiles_done.code = 2;
+    for (const Outcome& f : failures) {
+      if (f.code != 2) tiles_done.code = 1;
+      tiles_done.message += (tiles_done.message.empty() ? "" : "; ") + f.message;
+    }
   }
   broadcast(tiles_done);
   if (mpi.rank != 0) return;
