@@ -66,6 +66,11 @@ NodeName=${NODE} NodeAddr=127.0.0.1 CPUs=${CPUS} RealMemory=${MEM} State=UNKNOWN
 PartitionName=ci Nodes=ALL Default=YES MaxTime=INFINITE State=UP
 CONF
 export SLURM_CONF=$D/slurm.conf
+# In a network namespace with nothing but loopback, slurmctld fails in getaddrinfo unless lo has a
+# second address (../shared/recipes/cluster-on-one-machine.md).
+if command -v ip >/dev/null && [ "$(ip -o link show | grep -vc ': lo:')" = 0 ]; then
+  ip addr add 127.0.0.2/8 dev lo 2>/dev/null || true
+fi
 slurmctld -f "$SLURM_CONF"
 slurmd -f "$SLURM_CONF"
 for i in $(seq 120); do
