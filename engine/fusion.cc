@@ -200,6 +200,68 @@ FrameReach reach_of(const DepthFrame& f, const FusionOptions& options, const Roo
   return frame_reach(f, triangulate(f, options.triangulate), root, options.integrate, brick_level);
 }
 
+// The reach of depth maps [0, n) (load(i) gives the i-th as integration sees it), restricted to
+// `region` when given: per depth map its bricks, and the surface cells of all, sorted and unique.
+struct Reaches {
+  std::vector<std::vector<std::uint64_t>> bricks;
+  std::vector<VoxelKey> cells;
+  std::vector<std::uint64_t> touched() const {  // every brick reached, sorted, unique
+    std::vector<std::uint64_t> all;
+    for (const auto& b : bricks) all.insert(all.end(), b.begin(), b.end());
+    sort_unique(all);
+    return all;
+  }
+};
+
+template <typename LoadFrame>
+Reaches gather_reaches(std::size_t n, LoadFrame&& load, const FusionOptions& options, const RootCube& root,
+                       int brick_level, const BrickBox* region, const ProgressFn& progress) {
+  Reaches out;
+  out.bricks.resize(n);
+  std::size_t cells_unique = 0, planned = 0;
+  std::mutex mutex;
+  tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
+    FrameReach r = reach_of(load(i), options, root, brick_level);
+    if (region) {  // a cluster tile's run: only its bricks matter
+      const auto outside = [&](std::uint64_t id) { return !region->contains(BrickCoord::unpack(id)); };
+      r.bricks.erase(std::remove_if(r.bricks.begin(), r.bricks.end(), outside), r.bricks.end());
+      r.cells.erase(std::remove_if(r.cells.begin(), r.cells.end(),
+                                   [&](VoxelKey k) { return !region->contains(brick_of(k, brick_level)); }),
+                    r.cells.end());
+    }
+    out.bricks[i] = std::move(r.bricks);
+    std::lock_guard lock(mutex);
+    out.cells.insert(out.cells.end(), r.cells.begin(), r.cells.end());
+    // Overlapping views share most cells: merge as they come, so the list stays near the number
+    // of distinct cells rather than their sum over depth maps.
+    if (out.cells.size() > 2 * cells_unique + (std::size_t{1} << 20)) {
+      sort_unique(out.cells);
+      cells_unique = out.cells.size();
+    }
+    report(progress, "plan", double(++planned), double(n));
+  });
+  sort_unique(out.cells);
+  return out;
+}
+
+// Per tile, the positions i (in order) of the depth maps whose reach meets it, given as ids[i].
+std::vector<std::vector<std::size_t>> frames_per_tile(const std::vector<BrickBox>& tiles, const Reaches& reach,
+                                                      const std::vector<std::size_t>& ids) {
+  std::vector<std::vector<std::size_t>> out(tiles.size());
+  std::vector<char> meets(tiles.size());
+  for (std::size_t i = 0; i < reach.bricks.size(); ++i) {
+    std::fill(meets.begin(), meets.end(), 0);
+    for (std::uint64_t id : reach.bricks[i]) {
+      const std::size_t t = tile_of(tiles, BrickCoord::unpack(id));
+      if (t == tiles.size()) throw std::logic_error("a brick a depth map reaches lies in no tile of the plan");
+      meets[t] = 1;
+    }
+    for (std::size_t t = 0; t < tiles.size(); ++t)
+      if (meets[t]) out[t].push_back(ids[i]);
+  }
+  return out;
+}
+
 // The plan of a sweep over depth maps [from, to) (scheduler/tile_plan.h): each depth map's reach
 // and surface cells; unless `progress` carries the job's recorded plan, new tiles cut from the
 // estimated field (recorded in `progress`); returns, per tile, the depth maps whose reach meets
@@ -210,57 +272,21 @@ std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t t
                                                  const ProgressFn& progress_fn, IntegrationProgress& progress,
                                                  FusionStats& stats, const BrickBox* region) {
   const int brick_level = map.brick_level();
-  std::vector<std::vector<std::uint64_t>> reach_bricks(to - from);
-  std::vector<VoxelKey> cells;
-  std::size_t cells_unique = 0, planned = 0;
-  std::mutex cells_mutex;
-  tbb::parallel_for(from, to, [&](std::size_t i) {
-    const DepthFrame f = load_frame(i);
-    FrameReach r = reach_of(f, options, root, brick_level);
-    if (region) {  // a cluster tile's run: only its bricks matter
-      const auto outside = [&](std::uint64_t id) { return !region->contains(BrickCoord::unpack(id)); };
-      r.bricks.erase(std::remove_if(r.bricks.begin(), r.bricks.end(), outside), r.bricks.end());
-      r.cells.erase(std::remove_if(r.cells.begin(), r.cells.end(),
-                                   [&](VoxelKey k) { return !region->contains(brick_of(k, brick_level)); }),
-                    r.cells.end());
-    }
-    reach_bricks[i - from] = std::move(r.bricks);
-    std::lock_guard lock(cells_mutex);
-    cells.insert(cells.end(), r.cells.begin(), r.cells.end());
-    // Overlapping views share most cells: merge as they come, so the list stays near the number
-    // of distinct cells rather than their sum over depth maps.
-    if (cells.size() > 2 * cells_unique + (std::size_t{1} << 20)) {
-      sort_unique(cells);
-      cells_unique = cells.size();
-    }
-    report(progress_fn, "plan", double(++planned), double(to - from));
-  });
+  const Reaches reach = gather_reaches(
+      to - from, [&](std::size_t i) { return load_frame(from + i); }, options, root, brick_level, region, progress_fn);
   if (!progress.sweeping()) {
-    sort_unique(cells);
-    std::vector<std::uint64_t> touched;
-    for (const auto& b : reach_bricks) touched.insert(touched.end(), b.begin(), b.end());
-    sort_unique(touched);
     // 70% of the limit per tile: the estimate is within about 25% on the scenes measured, and the
     // depth maps in flight need room (the cache spills if a tile outgrows it anyway).
-    const auto estimate = estimate_brick_bytes(cells, brick_level, options.integrate, map.field_bytes(), touched);
+    const auto estimate =
+        estimate_brick_bytes(reach.cells, brick_level, options.integrate, map.field_bytes(), reach.touched());
     stats.plan_estimate_bytes = 0;
     for (const auto& e : estimate) stats.plan_estimate_bytes += e.second;
     progress.tiles = cut_tiles(estimate, brick_level, 0.7 * double(map.memory_limit()), region);
     progress.tile = progress.tile_frames = progress.steps = 0;
   }
-  std::vector<std::vector<std::size_t>> tile_frames(progress.tiles.size());
-  std::vector<char> reaches(progress.tiles.size());
-  for (std::size_t i = from; i < to; ++i) {
-    std::fill(reaches.begin(), reaches.end(), 0);
-    for (std::uint64_t id : reach_bricks[i - from]) {
-      const std::size_t t = tile_of(progress.tiles, BrickCoord::unpack(id));
-      if (t == progress.tiles.size()) throw std::logic_error("a brick a depth map reaches lies in no tile of the plan");
-      reaches[t] = 1;
-    }
-    for (std::size_t t = 0; t < progress.tiles.size(); ++t)
-      if (reaches[t]) tile_frames[t].push_back(i);
-  }
-  return tile_frames;
+  std::vector<std::size_t> ids(to - from);
+  for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = from + i;
+  return frames_per_tile(progress.tiles, reach, ids);
 }
 
 }  // namespace
@@ -284,39 +310,19 @@ FusionPlan plan_fusion(const FrameSource& source, const FusionOptions& options, 
 
   // Each depth map's reach; the field's bytes per brick estimated from the surface cells (the
   // work of every later stage grows with them).
-  std::vector<std::vector<std::uint64_t>> reach(plan.frames.size());
-  std::vector<VoxelKey> cells;
-  std::size_t cells_unique = 0, planned = 0;
-  std::mutex mutex;
-  tbb::parallel_for(std::size_t(0), plan.frames.size(), [&](std::size_t i) {
-    DepthFrame f = source.load(plan.frames[i]);
-    clip_to_box(f, clip);
-    FrameReach r = reach_of(f, options, plan.root, plan.brick_level);
-    reach[i] = std::move(r.bricks);
-    std::lock_guard lock(mutex);
-    cells.insert(cells.end(), r.cells.begin(), r.cells.end());
-    if (cells.size() > 2 * cells_unique + (std::size_t{1} << 20)) {
-      sort_unique(cells);
-      cells_unique = cells.size();
-    }
-    report(progress, "plan", double(++planned), double(plan.frames.size()));
-  });
-  sort_unique(cells);
-  std::vector<std::uint64_t> touched;
-  for (const auto& b : reach) touched.insert(touched.end(), b.begin(), b.end());
-  sort_unique(touched);
-  const auto estimate = estimate_brick_bytes(cells, plan.brick_level, options.integrate, {}, touched);
+  const Reaches reach = gather_reaches(
+      plan.frames.size(),
+      [&](std::size_t i) {
+        DepthFrame f = source.load(plan.frames[i]);
+        clip_to_box(f, clip);
+        return f;
+      },
+      options, plan.root, plan.brick_level, nullptr, progress);
+  const auto estimate = estimate_brick_bytes(reach.cells, plan.brick_level, options.integrate, {}, reach.touched());
   plan.tiles = split_tiles(estimate, plan.brick_level, n_tiles);
   plan.work.assign(plan.tiles.size(), 0.0);
   for (const auto& [c, bytes] : estimate) plan.work[tile_of(plan.tiles, c)] += bytes;
-  plan.tile_frames.resize(plan.tiles.size());
-  std::vector<char> reaches(plan.tiles.size());
-  for (std::size_t i = 0; i < plan.frames.size(); ++i) {
-    std::fill(reaches.begin(), reaches.end(), 0);
-    for (std::uint64_t id : reach[i]) reaches[tile_of(plan.tiles, BrickCoord::unpack(id))] = 1;
-    for (std::size_t t = 0; t < plan.tiles.size(); ++t)
-      if (reaches[t]) plan.tile_frames[t].push_back(plan.frames[i]);
-  }
+  plan.tile_frames = frames_per_tile(plan.tiles, reach, plan.frames);
   return plan;
 }
 
