@@ -4,6 +4,8 @@
 #include <tbb/task_arena.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -14,6 +16,7 @@
 #include "cli/progress_printer.h"
 #include "engine/error.h"
 #include "scheduler/cluster.h"
+#include "scheduler/cluster_stage.h"
 #include "scheduler/job.h"
 
 namespace sf::cli {
@@ -33,9 +36,37 @@ struct PlanArgs {
 
 struct TileArgs {
   FuseArgs fuse;
-  std::string dir;
+  std::string dir, stage = "integrate";
   long tile = -1;
 };
+
+// What a tile's stages after integration need: the plan, the job's parameters, the budget.
+TileStageContext stage_context(const std::filesystem::path& dir, const ClusterPlan& plan, const FuseArgs& options) {
+  TileStageContext c;
+  c.job_dir = dir;
+  c.plan = plan;
+  FuseArgs a;
+  a.config = (dir / "config.toml").string();
+  a.quiet = true;
+  ParameterSet params;
+  c.options = fusion_options(a, params);
+  c.memory_limit = options.memory_limit.empty() ? default_memory_limit()
+                                                : parse_byte_size(options.memory_limit, "--memory-limit");
+  c.checkpoint_seconds = options.checkpoint_seconds;
+  if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_IN_EXTRACTION")) c.kill_in_extraction = std::strtoull(k, nullptr, 10);
+  return c;
+}
+
+// Runs `f` in an arena of the requested threads with a progress line.
+template <typename F>
+void in_arena(const FuseArgs& options, F&& f, TileStageContext& c) {
+  ProgressPrinter printer(options.quiet);
+  c.progress = [&](std::string_view stage, double done, double total) { printer(stage, done, total); };
+  tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::info::default_concurrency());
+  arena.execute(f);
+  printer.finish();
+  c.progress = nullptr;
+}
 
 struct MergeArgs {
   FuseArgs fuse;
@@ -111,7 +142,7 @@ void run_plan(const FuseArgs& a, std::size_t tiles) {
               abs.c_str(), cp.tiles.size(), abs.c_str(), abs.c_str(), abs.c_str());
 }
 
-void run_tile(const std::string& job_dir, long tile_number, const FuseArgs& options) {
+void run_tile(const std::string& job_dir, long tile_number, const FuseArgs& options, const std::string& stage) {
   const std::filesystem::path dir = job_dir;
   const ClusterPlan plan = read_cluster_plan(dir);
   const long k = tile_number >= 0 ? tile_number : tile_from_environment();
@@ -124,14 +155,33 @@ void run_tile(const std::string& job_dir, long tile_number, const FuseArgs& opti
   // cluster engines' failure handling.
   if (const char* f = std::getenv("SCALEFUSE_TEST_FAIL_TILE"); f && std::to_string(k) == f)
     throw std::runtime_error("tile " + std::to_string(k) + ": failure injected by SCALEFUSE_TEST_FAIL_TILE");
+  const auto& stages = tile_stages();
+  if (std::find(stages.begin(), stages.end(), stage) == stages.end())
+    throw InputError("run-tile: no stage '" + stage + "' (stages, in order: integrate, regularize, prepare, "
+                     "tetrahedralize, snap, march, number, faces, sort)");
+  TileStageContext context = stage_context(dir, plan, options);
+  const auto clock = std::chrono::steady_clock::now();
+  const auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - clock).count(); };
+  if (stage != "integrate") {
+    bool ran = false;
+    in_arena(options, [&] { ran = run_tile_stage(context, std::size_t(k), stage); }, context);
+    if (ran) std::printf("tile %ld: stage %s done in %.1f s\n", k, stage.c_str(), seconds());
+    else std::printf("tile %ld: stage %s was done before; nothing to do\n", k, stage.c_str());
+    return;
+  }
+  const auto boundary = [&] {
+    in_arena(options, [&] { write_tile_boundary(context, std::size_t(k)); }, context);
+  };
   if (tile.frames.empty()) {
-    std::printf("tile %ld: no depth map reaches it; nothing to do\n", k);
+    boundary();
+    std::printf("tile %ld: no depth map reaches it; nothing to integrate\n", k);
     return;
   }
   const std::filesystem::path tile_dir = tile_job_dir(dir, std::size_t(k));
   if (std::filesystem::exists(tile_dir / "job.sqlite")) {
     const JobStatus st = Job::status(tile_dir);
-    if (st.stage == "integrated" && st.integrated == tile.frames.size()) {
+    if ((st.stage == "integrated" || st.stage == "extracting") && st.integrated == tile.frames.size()) {
+      boundary();
       std::printf("tile %ld: already integrated (%zu depth maps, %zu bricks); nothing to do\n", k, st.integrated, st.bricks);
       return;
     }
@@ -147,11 +197,57 @@ void run_tile(const std::string& job_dir, long tile_number, const FuseArgs& opti
   args.config = (dir / "config.toml").string();
   args.tile = FuseArgs::TileRun{std::size_t(k), tile.frames, tile.box, plan.root, plan.brick_level};
   run_fuse(args);
+  boundary();  // what the neighbouring tiles' regularization needs of this one
 }
 
 void run_merge(const std::string& job_dir, const std::string& output, const FuseArgs& options) {
   const std::filesystem::path dir = job_dir;
   const ClusterPlan plan = read_cluster_plan(dir);
+  TileStageContext context = stage_context(dir, plan, options);
+  const StagesStatus stages = tile_stages_status(context);
+  const bool regularized_any = [&] {
+    for (std::size_t t = 0; t < plan.tiles.size(); ++t)
+      if (tile_stage_finished(context, t, "regularize")) return true;
+    return false;
+  }();
+  if (stages.pending.empty()) {
+    // Every tile ran every stage: only the last pass is left.
+    const std::string mesh = output.empty() ? Job::status(dir).output : output;
+    ExtractStats es;
+    std::pair<std::size_t, std::size_t> counts;
+    const auto clock = std::chrono::steady_clock::now();
+    in_arena(options, [&] {
+      counts = write_job_mesh(mesh, dir, [&](MeshStream& out) { write_tiles_mesh(context, out, &es); });
+    }, context);
+    {
+      JobOptions jo;
+      jo.dir = dir;
+      Job job(jo, "", "", "");
+      job.finished(std::filesystem::absolute(mesh));
+    }
+    if (!options.quiet)
+      std::fprintf(stderr, "merge: %zu tiles' extraction written in %.1f s: %zu voxels, %zu vertices, %zu triangles\n",
+                   plan.tiles.size(), std::chrono::duration<double>(std::chrono::steady_clock::now() - clock).count(),
+                   std::size_t(es.voxels), counts.first, counts.second);
+    FusionStats fs;
+    fs.format = "cluster tiles";
+    fs.extract = es;
+    fs.times.push_back({"write", std::chrono::duration<double>(std::chrono::steady_clock::now() - clock).count()});
+    fs.peak_rss_bytes = peak_rss_bytes();
+    write_stats_file(options.stats_json, fs, counts.first, counts.second);
+    std::printf("mesh written to %s\n", std::filesystem::absolute(mesh).c_str());
+    return;
+  }
+  if (regularized_any) {
+    std::string tiles;
+    for (std::size_t i = 0; i < stages.tiles.size() && i < 8; ++i) tiles += (i ? ", " : "") + std::to_string(stages.tiles[i]);
+    if (stages.tiles.size() > 8) tiles += ", ...";
+    throw InputError(dir.string() + ": " + std::to_string(stages.tiles.size()) + " of " + std::to_string(plan.tiles.size()) +
+                     " tiles have not finished stage " + stages.pending + " (tiles " + tiles +
+                     "); run: scalefuse run-tile " + std::filesystem::absolute(dir).string() + " --stage " +
+                     stages.pending + " --tile K");
+  }
+  // No tile ran the stages after integration: the merge regularizes and extracts on this node.
   const JobStatus st = Job::status(dir);
   if (st.stage == "integrating" && st.integrated == 0) {
     // Every tile integrated, or say which are not and how to run them.
@@ -164,7 +260,7 @@ void run_merge(const std::string& job_dir, const std::string& output, const Fuse
       std::string why = "not started";
       if (std::filesystem::exists(tile_dir / "job.sqlite")) {
         const JobStatus ts = Job::status(tile_dir);
-        if (ts.stage == "integrated" && ts.integrated == plan.tiles[t].frames.size()) {
+        if ((ts.stage == "integrated" || ts.stage == "extracting") && ts.integrated == plan.tiles[t].frames.size()) {
           fields.push_back(Job::field(tile_dir));
           continue;
         }
@@ -209,8 +305,9 @@ void run_slurm(SlurmArgs sa) {
   write_text_atomically(logs / "submit.sh", s.submit);
   std::filesystem::permissions(logs / "submit.sh", std::filesystem::perms::owner_exec | std::filesystem::perms::group_exec,
                                std::filesystem::perm_options::add);
-  std::printf("wrote %s/{tiles.sbatch,merge.sbatch,submit.sh} (%zu array tasks, then the merge)\n", logs.c_str(),
-              plan.tiles.size());
+  std::printf("wrote %s/{tiles.sbatch,merge.sbatch,submit.sh} (an array of %zu tasks per stage, %zu stages, then "
+              "the merge)\n",
+              logs.c_str(), plan.tiles.size(), tile_stages().size());
   if (!sa.submit) {
     std::printf("submit with: %s/submit.sh\n", logs.c_str());
     return;
@@ -260,8 +357,11 @@ void add_cluster_commands(CLI::App& app) {
     cmd->add_option("dir", ta->dir, "job directory made by scalefuse plan")->required();
     cmd->add_option("--tile", ta->tile, "tile number (default: SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX)")
         ->check(CLI::NonNegativeNumber);
+    cmd->add_option("--stage", ta->stage,
+                    "integrate (default), then once every tile has finished the one before: regularize, prepare, "
+                    "tetrahedralize, snap, march, number, faces, sort (docs/cluster.md)");
     add_job_options(cmd, ta->fuse);
-    cmd->callback([ta] { run_tile(ta->dir, ta->tile, ta->fuse); });
+    cmd->callback([ta] { run_tile(ta->dir, ta->tile, ta->fuse, ta->stage); });
   }
   {
     auto ma = std::make_shared<MergeArgs>();

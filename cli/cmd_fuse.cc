@@ -192,6 +192,24 @@ void link_into_job(const std::filesystem::path& output, const std::filesystem::p
 
 }  // namespace
 
+void write_stats_file(const std::string& path, const FusionStats& stats, std::size_t vertices, std::size_t triangles) {
+  if (path.empty()) return;
+  const std::string tmp = path + ".tmp";
+  std::ofstream(tmp) << stats_json(stats, MeshCounts{vertices, triangles}).dump(2) << "\n";
+  std::filesystem::rename(tmp, path);
+}
+
+std::pair<std::size_t, std::size_t> write_job_mesh(const std::string& output, const std::filesystem::path& job_dir,
+                                                   const std::function<void(MeshStream&)>& produce) {
+  MeshCounts counts;
+  {
+    NonEmptyPly ply(output, &counts);
+    produce(ply);
+  }
+  link_into_job(output, job_dir / "mesh.ply");
+  return {counts.vertices, counts.triangles};
+}
+
 FusionOptions fusion_options(const FuseArgs& a, ParameterSet& params) {
   FusionOptions options;
   register_parameters(params, options);

@@ -10,6 +10,7 @@
 #include "cli/commands.h"
 #include "engine/error.h"
 #include "scheduler/cluster.h"
+#include "scheduler/cluster_stage.h"
 #include "scheduler/job.h"
 
 namespace sf::cli {
@@ -43,6 +44,7 @@ namespace {
 // no depth map reaches it) and depth maps integrated of its own.
 struct TileState {
   std::string stage;
+  std::string stage_done;  // the last of tile_stages() it has finished (integrate: with its boundary)
   std::size_t integrated = 0, depth_maps = 0, bricks = 0;
 };
 std::vector<TileState> tile_states(const std::filesystem::path& dir, const ClusterPlan& plan) {
@@ -57,10 +59,14 @@ std::vector<TileState> tile_states(const std::filesystem::path& dir, const Clust
       s.stage = "not started";
     } else {
       const JobStatus ts = Job::status(tile_dir);
-      s.stage = ts.stage == "new" ? "not started" : ts.stage;
+      s.stage = ts.stage == "new" ? "not started" : ts.stage == "extracting" ? "integrated" : ts.stage;
       s.integrated = ts.integrated;
       s.bricks = ts.bricks;
     }
+    TileStageContext c;
+    c.job_dir = dir;
+    for (const std::string& stage : tile_stages())
+      if (tile_stage_finished(c, t, stage)) s.stage_done = stage;
     out.push_back(s);
   }
   return out;
@@ -88,7 +94,8 @@ void run_status(const std::string& dir, bool json) {
     if (plan) {
       nlohmann::json t = nlohmann::json::array();
       for (const TileState& s : tiles)
-        t.push_back({{"stage", s.stage}, {"depth_maps", s.depth_maps}, {"integrated", s.integrated}, {"bricks", s.bricks}});
+        t.push_back({{"stage", s.stage}, {"stage_done", s.stage_done}, {"depth_maps", s.depth_maps},
+                     {"integrated", s.integrated}, {"bricks", s.bricks}});
       j["cluster"] = {{"tiles", t}};
     }
     std::printf("%s\n", j.dump(2).c_str());
@@ -117,8 +124,9 @@ void run_status(const std::string& dir, bool json) {
                 done, started, tiles.size() - done - started - empty, empty,
                 done + empty == tiles.size() && st.integrated == 0 ? " (ready to merge)" : "");
     for (std::size_t t = 0; t < tiles.size() && t < 64; ++t)
-      std::printf("  tile %-4zu  %-12s %zu of %zu depth maps, %zu bricks\n", t, tiles[t].stage.c_str(),
-                  tiles[t].integrated, tiles[t].depth_maps, tiles[t].bricks);
+      std::printf("  tile %-4zu  %-12s %zu of %zu depth maps, %zu bricks%s%s\n", t, tiles[t].stage.c_str(),
+                  tiles[t].integrated, tiles[t].depth_maps, tiles[t].bricks,
+                  tiles[t].stage_done.empty() ? "" : "; stages done up to ", tiles[t].stage_done.c_str());
   }
   std::printf("bricks       %zu\n", st.bricks);
   if (!st.extraction.empty()) {

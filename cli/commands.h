@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -12,6 +13,7 @@
 #include <vector>
 
 #include "engine/fusion.h"
+#include "engine/mesh.h"
 #include "engine/parameters.h"
 
 namespace sf::cli {
@@ -56,11 +58,19 @@ std::unique_ptr<FrameSource> open_inputs(const FuseArgs& args, const FusionOptio
 extern const std::vector<std::string> kIntegrationParameters;
 std::size_t default_memory_limit();
 void write_text_atomically(const std::filesystem::path& path, const std::string& text);
+// Streams the mesh `produce` makes into `output` (under a temporary name until complete; refused
+// before anything is written if it has no triangle) and links it into the job as mesh.ply.
+// Returns (vertices, triangles).
+// --stats: the statistics as JSON (written to a temporary name, then renamed); nothing if path is empty.
+void write_stats_file(const std::string& path, const FusionStats& stats, std::size_t vertices, std::size_t triangles);
+std::pair<std::size_t, std::size_t> write_job_mesh(const std::string& output, const std::filesystem::path& job_dir,
+                                                   const std::function<void(MeshStream&)>& produce);
 // The cluster commands (cli/cmd_cluster.cc, docs/cluster.md). `options` carries the job options
 // (threads, memory limit, checkpoints, quiet, stats) of a tile's run or of the merge.
 void run_plan(const FuseArgs& args, std::size_t tiles);
 // tile < 0: from SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX.
-void run_tile(const std::string& job_dir, long tile, const FuseArgs& options);
+// stage: "integrate" (then the tile's boundary) or a later one of tile_stages() (scheduler/cluster_stage.h).
+void run_tile(const std::string& job_dir, long tile, const FuseArgs& options, const std::string& stage = "integrate");
 void run_merge(const std::string& job_dir, const std::string& output, const FuseArgs& options);
 // fuse --mpi (cli/mpi/fuse_mpi.cc; without MPI it throws InputError).
 void run_fuse_mpi(const FuseArgs& args, std::size_t tiles);

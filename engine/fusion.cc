@@ -100,6 +100,29 @@ int auto_brick_level(const RootCube& root, double finest_footprint, const Integr
   return std::clamp(finest - 8, 3, 10);
 }
 
+// What shapes the regularized voxels and the brick extraction's passes (not the memory budget,
+// thread count or extraction mode: the result does not depend on them).
+std::string extraction_signature(const FusionOptions& o, int brick_level) {
+  std::ostringstream s;
+  s << std::hexfloat << "tau0 " << o.regularize.tau0 << " tau1 " << o.regularize.tau1 << " n "
+    << o.extract.neighbourhood_n << " snap " << o.extract.snap_fraction << " components "
+    << o.extract.min_component_triangles << " bricks " << brick_level;
+  return s.str();
+}
+
+std::vector<SurfaceVoxel> surface_voxels(const std::vector<std::pair<VoxelKey, VoxelData>>& brick) {
+  std::vector<SurfaceVoxel> voxels(brick.size());
+  for (std::size_t i = 0; i < brick.size(); ++i) {
+    const auto& [k, v] = brick[i];
+    SurfaceVoxel& s = voxels[i];
+    s.key = k;
+    s.distance = v.distance;
+    s.weight = v.weight;
+    for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
+  }
+  return voxels;
+}
+
 std::size_t peak_rss_bytes() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
@@ -110,15 +133,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// What shapes the regularized voxels and the brick extraction's passes (not the memory budget,
-// thread count or extraction mode: the result does not depend on them).
-std::string extraction_signature(const FusionOptions& o, int brick_level) {
-  std::ostringstream s;
-  s << std::hexfloat << "tau0 " << o.regularize.tau0 << " tau1 " << o.regularize.tau1 << " n "
-    << o.extract.neighbourhood_n << " snap " << o.extract.snap_fraction << " components "
-    << o.extract.min_component_triangles << " bricks " << brick_level;
-  return s.str();
-}
 
 void clip_to_box(DepthFrame& f, const std::optional<Eigen::AlignedBox3d>& box) {
   if (!box) return;
@@ -583,16 +597,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     stats.regularize = regularize_bricks(
         map, options.regularize, hooks.progress,
         [&](BrickCoord coord, std::vector<std::pair<VoxelKey, VoxelData>>&& brick) {
-          std::vector<SurfaceVoxel> voxels(brick.size());
-          for (std::size_t i = 0; i < brick.size(); ++i) {
-            const auto& [k, v] = brick[i];
-            SurfaceVoxel& s = voxels[i];
-            s.key = k;
-            s.distance = v.distance;
-            s.weight = v.weight;
-            for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
-          }
-          bricks.add(coord.packed(), voxels);
+          bricks.add(coord.packed(), surface_voxels(brick));
         },
         [&](BrickCoord coord) { return bricks.added_before(coord.packed()); });
     bricks.all_added();

@@ -208,4 +208,10 @@ std::optional<Eigen::AlignedBox3d> parse_bbox(const std::string& text);
 
 std::size_t peak_rss_bytes();
 
+// What shapes the regularized voxels and the brick extraction's passes (a job's record of an
+// extraction holds for this signature only).
+std::string extraction_signature(const FusionOptions& options, int brick_level);
+// A brick's regularized voxels as the extraction takes them (voxels without colour are grey).
+std::vector<SurfaceVoxel> surface_voxels(const std::vector<std::pair<VoxelKey, VoxelData>>& brick);
+
 }  // namespace sf

@@ -152,22 +152,14 @@ RegularizeStats regularize(BrickMap& map, const RegularizeOptions& options, cons
 // faces on the coarser h_B grid: every voxel of level > B that the chain of a voxel of brick X
 // touches lies in X's closed box, i.e. in X or on the lower faces of its 7 upper neighbours. Levels
 // <= B sit on brick corners and are regularized first, all together (they are few).
-RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& options, const ProgressFn& progress,
-                                  const BrickSink& sink, const std::function<bool(BrickCoord)>& skip) {
+void regularize_boundary(const BrickMap& map, const BoundarySink& sink) {
   const int B = map.brick_level();
   const std::vector<Brick*> bricks = map.bricks();
-  RegularizeStats stats;
-  std::mutex stats_mutex;  // also serializes the sink and progress
-
-  // Pass 1: the voxels of levels <= B, and each brick's lower-face voxels of finer levels (a local
-  // coordinate 0 on some axis), raw.
-  VoxelTable coarse(B);
-  std::vector<std::vector<std::pair<VoxelKey, VoxelData>>> faces(bricks.size());
-  std::mutex coarse_mutex;
+  std::mutex sink_mutex;
   tbb::parallel_for(std::size_t(0), bricks.size(), [&](std::size_t i) {
     VoxelTable scratch(B);
     const VoxelTable& t = map.field_of(*bricks[i], scratch);
-    std::vector<std::pair<VoxelKey, VoxelData>> low;
+    std::vector<RawVoxel> low, faces;
     t.for_each([&](VoxelKey k, const VoxelData& v) {
       const int l = k.level();
       if (l <= B) {
@@ -175,11 +167,39 @@ RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& option
         return;
       }
       const std::uint32_t m = (1u << (l - B)) - 1;
-      if ((k.x() & m) == 0 || (k.y() & m) == 0 || (k.z() & m) == 0) faces[i].push_back({k, v});
+      if ((k.x() & m) == 0 || (k.y() & m) == 0 || (k.z() & m) == 0) faces.push_back({k, v});
     });
-    std::lock_guard lock(coarse_mutex);
-    for (const auto& [k, v] : low) coarse.find_or_insert(k) = v;
+    std::lock_guard lock(sink_mutex);
+    sink(bricks[i]->coord, std::move(low), std::move(faces));
   });
+}
+
+RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& options, const ProgressFn& progress,
+                                  const BrickSink& sink, const std::function<bool(BrickCoord)>& skip,
+                                  const RegularizeBoundary* boundary) {
+  const int B = map.brick_level();
+  const std::vector<Brick*> bricks = map.bricks();
+  RegularizeStats stats;
+  std::mutex stats_mutex;  // also serializes the sink and progress
+
+  // Pass 1: the voxels of levels <= B, and each brick's lower-face voxels of finer levels, raw
+  // (read here, or given).
+  VoxelTable coarse(B);
+  std::unordered_map<std::uint64_t, std::vector<RawVoxel>> faces;  // packed brick -> its face voxels
+  if (boundary) {
+    for (const RawVoxel& r : boundary->coarse) coarse.find_or_insert(r.key) = r.data;
+  } else {
+    regularize_boundary(map, [&](BrickCoord c, std::vector<RawVoxel>&& low, std::vector<RawVoxel>&& f) {
+      for (const RawVoxel& r : low) coarse.find_or_insert(r.key) = r.data;
+      if (!f.empty()) faces[c.packed()] = std::move(f);
+    });
+  }
+  const auto visit_faces = [&](BrickCoord N, const std::function<void(const RawVoxel&)>& fn) {
+    if (boundary) return boundary->faces(N, fn);
+    const auto it = faces.find(N.packed());
+    if (it != faces.end())
+      for (const RawVoxel& r : it->second) fn(r);
+  };
   report(progress, "regularize", 1, double(bricks.size()) + 2);
 
   PhaseCounts coarse_counts;
@@ -192,9 +212,6 @@ RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& option
     for (int l = 0; l <= B; ++l) blend_level(levels[l], find, options, [](VoxelKey) { return true; }, coarse_counts);
   }
   report(progress, "regularize", 2, double(bricks.size()) + 2);
-
-  std::unordered_map<std::uint64_t, std::size_t> index;  // packed brick -> position in `bricks`
-  for (std::size_t i = 0; i < bricks.size(); ++i) index[bricks[i]->coord.packed()] = i;
 
   // Pass 2: each brick in its window: its own voxels, the final coarse voxels at its corners and
   // its upper neighbours' raw face voxels in its closed box; phase 1 above level B, phase 2, emit.
@@ -228,17 +245,18 @@ RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& option
         const VoxelData* v = coarse.find(k);
         if (v && v->live()) window.find_or_insert(k) = *v;
       }
+    const std::uint32_t last = (1u << B) - 1;
     for (int d = 1; d < 8; ++d) {
+      if (((d & 1) && X.x == last) || ((d & 2) && X.y == last) || ((d & 4) && X.z == last)) continue;
       const BrickCoord N{X.x + (d & 1), X.y + ((d >> 1) & 1), X.z + ((d >> 2) & 1)};
-      const auto it = index.find(N.packed());
-      if (it == index.end()) continue;
-      for (const auto& [k, v] : faces[it->second]) {
+      visit_faces(N, [&](const RawVoxel& r) {
+        const VoxelKey k = r.key;
         const std::uint32_t m = (1u << (k.level() - B)) - 1;
-        if ((d & 1) && (k.x() & m)) continue;
-        if ((d & 2) && (k.y() & m)) continue;
-        if ((d & 4) && (k.z() & m)) continue;
-        window.find_or_insert(k) = v;
-      }
+        if ((d & 1) && (k.x() & m)) return;
+        if ((d & 2) && (k.y() & m)) return;
+        if ((d & 4) && (k.z() & m)) return;
+        window.find_or_insert(k) = r.data;
+      });
     }
     const auto find = [&](VoxelKey k) {
       const VoxelData* v = window.find(k);

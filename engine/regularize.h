@@ -43,8 +43,28 @@ using BrickSink = std::function<void(BrickCoord brick, std::vector<std::pair<Vox
 // time, in no fixed order). Resident bricks are moved out of `map`, spilled ones read from their
 // tiles (which stay). Parallel in the calling arena. Bricks `skip` accepts are not handed to the
 // sink (a resumed job has them already) and are left out of the stats.
+//
+// The two reads can run in different processes (a cluster's tiles, engine/cluster_stage.h): the
+// first, regularize_boundary, gives each brick's raw voxels that other bricks' regularization
+// needs; regularize_bricks then takes everyone's (`boundary`) instead of reading them itself.
+struct RawVoxel {
+  VoxelKey key;
+  VoxelData data;
+};
+struct RegularizeBoundary {
+  std::vector<RawVoxel> coarse;  // every brick's voxels of levels <= the brick level
+  // Visits the lower-face voxels (of levels > the brick level) of a brick (none if it is absent).
+  std::function<void(BrickCoord, const std::function<void(const RawVoxel&)>&)> faces;
+};
 RegularizeStats regularize_bricks(BrickMap& map, const RegularizeOptions& options, const ProgressFn& progress,
-                                  const BrickSink& sink, const std::function<bool(BrickCoord)>& skip = nullptr);
+                                  const BrickSink& sink, const std::function<bool(BrickCoord)>& skip = nullptr,
+                                  const RegularizeBoundary* boundary = nullptr);
+
+// Each brick of `map` (read, not changed; in parallel): its voxels of levels <= the brick level
+// and its raw lower-face voxels of finer levels (a local coordinate 0 on some axis), to `sink`
+// (called one brick at a time, in no fixed order).
+using BoundarySink = std::function<void(BrickCoord brick, std::vector<RawVoxel>&& coarse, std::vector<RawVoxel>&& faces)>;
+void regularize_boundary(const BrickMap& map, const BoundarySink& sink);
 
 // Interpolates (distance, weight, colour) of the coarser level at voxel `key`'s position; false if a
 // required coarser voxel is missing. Exposed for tests.

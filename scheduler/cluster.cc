@@ -189,8 +189,9 @@ SlurmScripts slurm_scripts(const std::filesystem::path& job_dir, std::size_t til
     s << header("scalefuse-tiles", o.cpus, o.memory, o.time, logs + "/tile-%a.log");
     s << "#SBATCH --array=0-" << tiles - 1 << "\n";
     s << "set -euo pipefail\n";
-    s << "# the tile is SLURM_ARRAY_TASK_ID; a finished tile is a no-op, a killed one resumes\n";
-    s << "exec " << quoted(o.scalefuse) << " run-tile " << quoted(dir) << " --threads \"${SLURM_CPUS_PER_TASK:-"
+    s << "# the tile is SLURM_ARRAY_TASK_ID, the stage $1 (submit.sh submits one array per stage, each after\n";
+    s << "# the one before); a finished stage is a no-op, a killed one resumes\n";
+    s << "exec " << quoted(o.scalefuse) << " run-tile " << quoted(dir) << " --stage \"${1:-integrate}\" --threads \"${SLURM_CPUS_PER_TASK:-"
       << o.cpus << "}\" --memory-limit " << budget(o.memory) << "\n";
     out.tiles = s.str();
   }
@@ -205,13 +206,21 @@ SlurmScripts slurm_scripts(const std::filesystem::path& job_dir, std::size_t til
   }
   {
     std::ostringstream s;
-    s << "#!/bin/sh\n# written by scalefuse slurm: submits the tiles' array, then the merge after all of them\n";
+    s << "#!/bin/sh\n# written by scalefuse slurm: submits one array of the tiles per stage, each after every task\n";
+    s << "# of the one before succeeded, then the merge after the last (a failure cancels what follows)\n";
     s << "set -eu\ncd " << quoted(logs) << "\n";
-    s << "tiles=$(sbatch --parsable tiles.sbatch)\ntiles=${tiles%%;*}\n";
-    s << "merge=$(sbatch --parsable --dependency=afterok:$tiles --kill-on-invalid-dep=yes merge.sbatch)\n";
+    s << "first= prev= all=\n";
+    s << "for stage in";
+    for (const char* stage : {"integrate", "regularize", "prepare", "tetrahedralize", "snap", "march", "number", "faces", "sort"})
+      s << ' ' << stage;
+    s << "; do\n";
+    s << "  id=$(sbatch --parsable ${prev:+--dependency=afterok:$prev --kill-on-invalid-dep=yes} "
+         "--job-name=\"scalefuse-$stage\" --output=" << quoted(logs) << "\"/$stage-%a.log\" tiles.sbatch \"$stage\")\n";
+    s << "  id=${id%%;*}\n  first=${first:-$id} prev=$id all=\"$all $id\"\ndone\n";
+    s << "merge=$(sbatch --parsable --dependency=afterok:$prev --kill-on-invalid-dep=yes merge.sbatch)\n";
     s << "merge=${merge%%;*}\n";
-    s << "echo \"tiles: Slurm job $tiles (array of " << tiles << "); merge: Slurm job $merge (runs if every tile succeeds)\"\n";
-    s << "echo \"$tiles $merge\" > submitted\n";
+    s << "echo \"tiles: Slurm jobs$all (an array of " << tiles << " per stage); merge: Slurm job $merge\"\n";
+    s << "printf '%s %s\\nstages:%s\\n' \"$first\" \"$merge\" \"$all\" > submitted\n";
     out.submit = s.str();
   }
   return out;

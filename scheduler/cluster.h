@@ -1,6 +1,7 @@
 #pragma once
-// Cluster runs (docs/cluster.md): a job cut into tiles that nodes integrate independently, then
-// one merge that regularizes and extracts the union of their fields.
+// Cluster runs (docs/cluster.md): a job cut into tiles that nodes integrate, regularize and
+// extract independently, stage by stage (scheduler/cluster_stage.h), then one merge that writes
+// the mesh (or, when the tiles only integrated, regularizes and extracts the union of their fields).
 //
 //   DIR/plan.json             the plan (written once by `scalefuse plan`, read by every tile run):
 //                             root cube, brick level, per tile its box of bricks, estimated work
@@ -11,8 +12,7 @@
 //                             tiles; only the process running tile K writes there
 //
 // Tiles share nothing while they run (a shared file system is read, each tile writes its own
-// folder), so a Slurm array or MPI ranks can run them in any order, anywhere, at once. The merge
-// links their tiles into DIR/tiles/ and continues as `scalefuse resume` would. Each voxel sums its
+// folder), so a Slurm array or MPI ranks can run them in any order, anywhere, at once. Each voxel sums its
 // contributions in depth-map order in whichever tile holds it, so the mesh is byte-identical to a
 // single-machine run's whatever the number of tiles.
 #include <cstddef>
@@ -52,8 +52,9 @@ std::filesystem::path tile_job_dir(const std::filesystem::path& job_dir, std::si
 // value that is not a tile number.
 long tile_from_environment();
 
-// Slurm batch scripts for a planned job: an array of one task per tile, and a merge that runs
-// only if every task succeeded (afterok; --kill-on-invalid-dep cancels it otherwise).
+// Slurm batch scripts for a planned job: an array of one task per tile for each stage, each after
+// the one before, and a merge that runs only if every task succeeded (afterok;
+// --kill-on-invalid-dep cancels what follows a failure).
 struct SlurmOptions {
   std::string scalefuse;      // the program, an absolute path every node can run
   std::string output;         // the mesh the merge writes

@@ -33,11 +33,22 @@ class Mailbox {
   // The mailbox a previous run left, holding the blobs `committed` (a journal's record of it).
   // Throws if the file is missing or shorter than they say.
   Mailbox(std::filesystem::path dir, std::string name, std::vector<Blob> committed);
+  // One file of a read-only union of mailboxes (a cluster's tiles each post to their own file;
+  // storage/blob_manifest below).
+  struct Part {
+    std::filesystem::path file;
+    std::vector<Blob> blobs;
+  };
+  // The union of several processes' files, read-only: blobs to one destination are collected in
+  // (src, order of posting) order, as from one file, provided every src posted to one file only.
+  // The files are opened on the first collect (a file is missing or short: that collect throws),
+  // so a union may name files whose readers are done and which are gone.
+  explicit Mailbox(std::vector<Part> parts);
   ~Mailbox();  // deletes the file unless keep_file() was called
   // The file outlives this object (a journal refers to it); remove_file() deletes it.
   void keep_file() { keep_ = true; }
   void remove_file();
-  const std::filesystem::path& path() const { return path_; }
+  const std::filesystem::path& path() const { return parts_[0].path; }
   Mailbox(const Mailbox&) = delete;
   Mailbox& operator=(const Mailbox&) = delete;
 
@@ -69,15 +80,29 @@ class Mailbox {
   // (ascending) since this object was made.
   std::vector<Blob> sync_blobs_from(const std::vector<std::uint64_t>& srcs) const;
 
+  // Flushes the file to disk (fdatasync).
+  void sync() const;
+  // Every blob (committed when reopened, and posted since), before any collect.
+  std::vector<Blob> blobs() const;
+
   std::uint64_t bytes_stored() const { return stored_.load(); }  // compressed, on disk
   std::uint64_t bytes_raw() const { return raw_.load(); }
 
  private:
-  using Entry = Blob;
+  struct Entry : Blob {
+    std::uint32_t part = 0;  // which file
+  };
+  struct File {
+    std::filesystem::path path;
+    int fd = -1;
+    std::uint64_t needed = 0;  // bytes the blobs need (a union's part, checked when opened)
+  };
   void seal() const;  // sorts the index (first collect after posting)
+  int fd_of(std::uint32_t part) const;  // opens a union's part on first use
 
-  std::filesystem::path path_;
-  int fd_ = -1;
+  mutable std::vector<File> parts_;  // [0]: the file this mailbox posts to (unless a union)
+  bool union_ = false;
+  mutable std::mutex open_mutex_;
   bool keep_ = false;
   std::size_t fresh_ = 0;  // index_[fresh_...] were posted by this object (until sealed)
   std::uint64_t end_ = 0;  // file size (guarded by mutex_)
@@ -86,6 +111,17 @@ class Mailbox {
   mutable std::vector<Entry> index_;  // guarded by mutex_ until sealed
   mutable std::atomic<bool> sealed_{false};
 };
+
+// A blob manifest: the blobs of some mailboxes one process committed, as a file that other
+// processes read (a cluster tile's record of a pass, engine/extract/brick_extract.h). Text, one
+// blob per line, written to a temporary name, synced and renamed.
+struct BlobRecord {
+  std::string box;
+  Mailbox::Blob blob;
+};
+void write_blob_manifest(const std::filesystem::path& file, const std::vector<BlobRecord>& records);
+// Throws InputError naming the file if it is missing or malformed.
+std::vector<BlobRecord> read_blob_manifest(const std::filesystem::path& file);
 
 // A new folder under the system's temporary directory ($TMPDIR), removed with its contents.
 class ScratchFolder {

@@ -143,6 +143,80 @@ TEST(Cluster, FinishedTilesAreNoOpsKilledTilesResumeAndMergeWaitsForAll) {
   EXPECT_TRUE(bytes_of(out) == bytes_of(ref));
 }
 
+// Regularization and extraction on the tiles too: every stage run by every tile (in another order
+// each stage, other threads and memory), then a merge that only writes the mesh.
+TEST(Cluster, TilesRunEveryStageAndTheMergeOnlyWritesTheSingleMachineMesh) {
+  const fs::path dir = test::scratch_dir("cluster-stages");
+  const fs::path ref = dir / "ref.ply";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q --threads 2 " + kScene).code, 0);
+  const std::string expected = bytes_of(ref);
+  const std::vector<std::string> stages = {"integrate", "regularize", "prepare", "tetrahedralize", "snap",
+                                           "march",     "number",     "faces",   "sort"};
+  for (std::size_t n : {1u, 4u}) {
+    const fs::path job = dir / ("j" + std::to_string(n));
+    const fs::path out = dir / ("m" + std::to_string(n) + ".ply");
+    ASSERT_EQ(scalefuse("plan " + bunny().string() + " --tiles " + std::to_string(n) + " --job " + job.string() + " -o " +
+                        out.string() + " -q " + kScene).code, 0);
+    for (std::size_t s = 0; s < stages.size(); ++s) {
+      for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t k = s % 2 ? i : n - 1 - i;
+        if (i == n - 1 && n > 1 && s + 1 < stages.size()) {
+          // The next stage before every tile finished this one is refused, naming the tile.
+          const CliRun early = scalefuse("run-tile " + job.string() + " --stage " + stages[s + 1] +
+                                         tile_arg(s % 2 ? 0 : n - 1) + " -q");
+          EXPECT_EQ(early.code, 2) << early.output;
+          EXPECT_NE(early.output.find("tile " + std::to_string(k) + " has not finished stage " + stages[s]),
+                    std::string::npos)
+              << early.output;
+        }
+        const CliRun r = scalefuse("run-tile " + job.string() + " --stage " + stages[s] + tile_arg(k) + " -q --threads " +
+                                   (k % 2 ? "1" : "2") + " --memory-limit " + (k % 2 ? "8M" : "64M"));
+        ASSERT_EQ(r.code, 0) << stages[s] << " tile " << k << ": " << r.output;
+      }
+      if (s == 3 && n > 1) {
+        const CliRun m = scalefuse("merge " + job.string() + " -q");
+        EXPECT_EQ(m.code, 2) << m.output;
+        EXPECT_NE(m.output.find("have not finished stage snap"), std::string::npos) << m.output;
+        EXPECT_FALSE(fs::exists(out));
+      }
+    }
+    // A finished stage is a no-op.
+    const CliRun again = scalefuse("run-tile " + job.string() + " --stage march" + tile_arg(0));
+    EXPECT_EQ(again.code, 0) << again.output;
+    EXPECT_NE(again.output.find("was done before"), std::string::npos) << again.output;
+    const nlohmann::json status = nlohmann::json::parse(scalefuse("status " + job.string() + " --json").output);
+    EXPECT_EQ(status["cluster"]["tiles"][0]["stage_done"], "sort");
+    const CliRun merged = scalefuse("merge " + job.string() + " --threads 2");
+    ASSERT_EQ(merged.code, 0) << merged.output;
+    EXPECT_NE(merged.output.find("extraction written"), std::string::npos) << merged.output;
+    EXPECT_TRUE(bytes_of(out) == expected) << n << " tiles: the mesh of the tiles' stages differs from one machine's";
+  }
+}
+
+// A tile killed in the middle of a stage resumes it brick by brick; the mesh is the same.
+TEST(Cluster, AKilledStageResumes) {
+  const fs::path dir = test::scratch_dir("cluster-stage-kill");
+  const fs::path ref = dir / "ref.ply", out = dir / "out.ply", job = dir / "job";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
+  ASSERT_EQ(scalefuse("plan " + bunny().string() + " --tiles 2 --job " + job.string() + " -o " + out.string() + " -q " +
+                      kScene).code, 0);
+  for (const std::string stage : {"integrate", "regularize", "prepare", "tetrahedralize", "snap", "march", "number",
+                                  "faces", "sort"})
+    for (std::size_t k = 0; k < 2; ++k) {
+      if (stage == "tetrahedralize" || stage == "regularize") {
+        // Killed after its second commit of finished bricks (one brick each: the journal commits at once).
+        const CliRun killed = scalefuse("run-tile " + job.string() + " --stage " + stage + tile_arg(k) +
+                                            " -q --threads 1 --checkpoint-seconds 0.000001",
+                                        "SCALEFUSE_TEST_KILL_IN_EXTRACTION=2");
+        EXPECT_NE(killed.code, 0) << stage << ": " << killed.output;
+      }
+      const CliRun r = scalefuse("run-tile " + job.string() + " --stage " + stage + tile_arg(k) + " -q");
+      ASSERT_EQ(r.code, 0) << stage << " tile " << k << ": " << r.output;
+    }
+  ASSERT_EQ(scalefuse("merge " + job.string() + " -q").code, 0);
+  EXPECT_TRUE(bytes_of(out) == bytes_of(ref));
+}
+
 TEST(Cluster, SlurmScriptsChainTheMergeAfterEveryTile) {
   const fs::path dir = test::scratch_dir("cluster-slurm");
   const fs::path job = dir / "job";
@@ -159,7 +233,13 @@ TEST(Cluster, SlurmScriptsChainTheMergeAfterEveryTile) {
   EXPECT_NE(merge.find(" merge '" + fs::absolute(job).string() + "' -o '" + fs::absolute(job / "mesh.ply").string() + "'"),
             std::string::npos)
       << merge;
-  EXPECT_NE(submit.find("--dependency=afterok:$tiles --kill-on-invalid-dep=yes merge.sbatch"), std::string::npos) << submit;
+  EXPECT_NE(tiles.find("--stage \"${1:-integrate}\""), std::string::npos) << tiles;
+  // One array per stage, each after the one before, then the merge after the last.
+  EXPECT_NE(submit.find("for stage in integrate regularize prepare tetrahedralize snap march number faces sort; do"),
+            std::string::npos)
+      << submit;
+  EXPECT_NE(submit.find("${prev:+--dependency=afterok:$prev --kill-on-invalid-dep=yes}"), std::string::npos) << submit;
+  EXPECT_NE(submit.find("--dependency=afterok:$prev --kill-on-invalid-dep=yes merge.sbatch"), std::string::npos) << submit;
   for (const char* f : {"tiles.sbatch", "merge.sbatch", "submit.sh"})
     EXPECT_EQ(test::run_command("bash -n " + (job / "slurm" / f).string()), 0) << f << " is not valid shell";
   // Without a plan there is nothing to submit; a damaged plan is named.

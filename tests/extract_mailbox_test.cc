@@ -6,11 +6,14 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "engine/extract/voxel_set.h"
+#include "engine/error.h"
 #include "storage/mailbox.h"
 
 namespace sf {
@@ -113,6 +116,81 @@ TEST(Mailbox, ReopensWithTheCommittedBlobsOnly) {
     ADD_FAILURE() << "a truncated scratch file was accepted";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("short.box"), std::string::npos) << e.what();
+  }
+}
+
+// A cluster's tiles each post to their own file; the union of the files, read through their
+// manifests, collects what one mailbox would have (sources are each one tile's).
+TEST(Mailbox, AUnionOfTilesFilesCollectsAsOneMailbox) {
+  const ScratchFolder dir("scalefuse-mailbox-test");
+  Mailbox one(dir.path(), "one");
+  std::vector<std::unique_ptr<Mailbox>> tiles;
+  for (int t = 0; t < 3; ++t) tiles.push_back(std::make_unique<Mailbox>(dir.path() / ("tile" + std::to_string(t)), "box"));
+  for (std::uint32_t i = 0; i < 60; ++i) {
+    const std::uint64_t dest = i % 5, src = (i * 7) % 12;  // source s belongs to tile s % 3
+    const std::vector<std::uint32_t> record{i, dest * 100 + src};
+    one.post(dest, src, record);
+    tiles[src % 3]->post(dest, src, record);
+  }
+  std::vector<Mailbox::Part> parts;
+  for (int t = 2; t >= 0; --t) {  // the order of the parts does not matter
+    tiles[std::size_t(t)]->keep_file();
+    const std::filesystem::path manifest = dir.path() / ("tile" + std::to_string(t)) / "pass.blobs";
+    std::vector<BlobRecord> records;
+    for (const Mailbox::Blob& b : tiles[std::size_t(t)]->blobs()) records.push_back({"box", b});
+    write_blob_manifest(manifest, records);
+    Mailbox::Part part{tiles[std::size_t(t)]->path(), {}};
+    for (const BlobRecord& r : read_blob_manifest(manifest)) {
+      EXPECT_EQ(r.box, "box");
+      part.blobs.push_back(r.blob);
+    }
+    parts.push_back(std::move(part));
+  }
+  tiles.clear();  // the files stay (keep_file)
+  Mailbox all(std::move(parts));
+  EXPECT_EQ(all.destinations(), one.destinations());
+  for (std::uint64_t dest = 0; dest < 5; ++dest) EXPECT_EQ(all.collect<std::uint32_t>(dest), one.collect<std::uint32_t>(dest));
+  EXPECT_EQ(all.bytes_raw(), one.bytes_raw());
+  EXPECT_THROW(all.post(0, 0, std::vector<int>{1}), std::logic_error);  // read-only
+}
+
+TEST(Mailbox, AUnionNamesAMissingOrShortFileAndManifestsAreChecked) {
+  const ScratchFolder dir("scalefuse-mailbox-test");
+  const std::filesystem::path file = dir.path() / "gone.box";
+  // Opened lazily: making the union works, collecting from it names the file.
+  const Mailbox gone(std::vector<Mailbox::Part>{{file, {{3, 1, 0, 0, 10, 40}}}});
+  EXPECT_EQ(gone.destinations(), std::vector<std::uint64_t>{3});
+  try {
+    gone.collect<std::uint32_t>(3);
+    FAIL() << "no error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("gone.box"), std::string::npos) << e.what();
+  }
+  std::ofstream(dir.path() / "short.box") << "abc";
+  const Mailbox short_one(std::vector<Mailbox::Part>{{dir.path() / "short.box", {{3, 1, 0, 0, 10, 40}}}});
+  try {
+    short_one.collect<std::uint32_t>(3);
+    FAIL() << "no error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("shorter than its tile's manifest says (10 bytes)"), std::string::npos) << e.what();
+  }
+  const std::filesystem::path manifest = dir.path() / "x.blobs";
+  EXPECT_THROW(read_blob_manifest(manifest), InputError);  // missing
+  write_blob_manifest(manifest, {{"box", {1, 2, 3, 4, 5, 6}}, {"other", {7, 8, 9, 10, 11, 12}}});
+  const std::vector<BlobRecord> back = read_blob_manifest(manifest);
+  ASSERT_EQ(back.size(), 2u);
+  EXPECT_EQ(back[1].box, "other");
+  EXPECT_EQ(back[1].blob.dest, 7u);
+  EXPECT_EQ(back[1].blob.raw, 12u);
+  for (const char* bad : {"", "scalefuse-blobs 2 0\nend\n", "scalefuse-blobs 1 2\nbox 1 2 3 4 5 6\nend\n",
+                          "scalefuse-blobs 1 1\nbox 1 2 3 4 5 6\n", "scalefuse-blobs 1 1\nbox 1 2 x 4 5 6\nend\n"}) {
+    std::ofstream(manifest) << bad;
+    try {
+      read_blob_manifest(manifest);
+      FAIL() << "accepted: " << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("x.blobs"), std::string::npos) << e.what();
+    }
   }
 }
 

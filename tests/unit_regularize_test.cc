@@ -5,6 +5,8 @@
 
 #include <cmath>
 #include <cstring>
+#include <functional>
+#include <memory>
 #include <map>
 #include <random>
 #include <set>
@@ -81,7 +83,7 @@ namespace {
 // A field over levels 0..7 around a sphere, dense enough that most voxels find their coarser
 // neighbours, with weights spread over [0, 1.2) so that voxels are blended, deleted for lack of
 // confidence and removed as duplicates at every level, brick corners and faces included.
-void fill_shell(BrickMap& m, unsigned seed) {
+void fill_shell(BrickMap& m, unsigned seed, const std::function<bool(VoxelKey)>& keep = nullptr) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> u(0.f, 1.f);
   std::vector<Contribution> batch;
@@ -95,7 +97,7 @@ void fill_shell(BrickMap& m, unsigned seed) {
           if (std::abs(r) > 3.0 / n + 0.02 || u(rng) < 0.1f) continue;
           Contribution c{VoxelKey::make(l, x, y, z), float(r), 1.2f * u(rng), {0, 0, 0}, true};
           for (auto& ch : c.colour) ch = std::uint8_t(255 * u(rng));
-          batch.push_back(c);
+          if (!keep || keep(c.key)) batch.push_back(c);
         }
   }
   m.apply(batch);
@@ -149,6 +151,60 @@ TEST(Regularize, BrickByBrickEqualsTheWholeFieldBitForBit) {
         EXPECT_EQ(st.voxels_after[l], want.voxels_after[l]);
       }
     }
+}
+
+// A cluster's tiles: each holds some bricks' field, gives its boundary (regularize_boundary), and
+// regularizes its bricks with every tile's boundary: the whole field's result, bit for bit.
+TEST(Regularize, TilesWithEachOthersBoundaryEqualTheWholeField) {
+  BrickMap reference(0);
+  fill_shell(reference, 7);
+  const RegularizeOptions opt;
+  regularize(reference, opt, {});
+  const auto expected = field_of(reference);
+  const int B = 3;
+  // Four tiles, cut at brick x = 4 and y = 3 (not a power of two).
+  const auto tile_of = [&](VoxelKey k) {
+    const BrickCoord c = brick_of(k, B);
+    return (c.x < 4 ? 0 : 1) + (c.y < 3 ? 0 : 2);
+  };
+  std::vector<std::unique_ptr<BrickMap>> tiles;
+  RegularizeBoundary boundary;
+  std::map<std::uint64_t, std::vector<RawVoxel>> faces;
+  std::size_t bricks = 0;
+  for (int t = 0; t < 4; ++t) {
+    tiles.push_back(std::make_unique<BrickMap>(B));
+    fill_shell(*tiles.back(), 7, [&](VoxelKey k) { return tile_of(k) == t; });
+    bricks += tiles.back()->brick_count();
+    regularize_boundary(*tiles.back(), [&](BrickCoord c, std::vector<RawVoxel>&& low, std::vector<RawVoxel>&& f) {
+      for (const RawVoxel& r : low) {
+        EXPECT_LE(r.key.level(), B);
+        boundary.coarse.push_back(r);
+      }
+      for (const RawVoxel& r : f) {
+        EXPECT_GT(r.key.level(), B);
+        EXPECT_EQ(brick_of(r.key, B).packed(), c.packed());
+      }
+      EXPECT_TRUE(faces.emplace(c.packed(), std::move(f)).second);
+    });
+  }
+  ASSERT_GT(bricks, 100u);
+  ASSERT_GT(boundary.coarse.size(), 10u);
+  boundary.faces = [&](BrickCoord c, const std::function<void(const RawVoxel&)>& fn) {
+    const auto it = faces.find(c.packed());
+    if (it != faces.end())
+      for (const RawVoxel& r : it->second) fn(r);
+  };
+  std::map<std::uint64_t, VoxelData> got;
+  for (auto& tile : tiles)
+    regularize_bricks(*tile, opt, {}, [&](BrickCoord, std::vector<std::pair<VoxelKey, VoxelData>>&& v) {
+      for (const auto& [k, d] : v) EXPECT_TRUE(got.emplace(k.bits, d).second);
+    }, nullptr, &boundary);
+  ASSERT_EQ(got.size(), expected.size());
+  for (const auto& [k, v] : expected) {
+    const auto it = got.find(k);
+    ASSERT_NE(it, got.end()) << VoxelKey{k}.level();
+    ASSERT_EQ(std::memcmp(&it->second, &v, sizeof v), 0) << "level " << VoxelKey{k}.level();
+  }
 }
 
 TEST(BrickMap, BrickOfVoxelsOfAllLevels) {

@@ -1,6 +1,7 @@
 // scalefuse fuse ... --mpi: the cluster plan run by MPI ranks (docs/cluster.md). Rank 0 plans, then
-// hands out tiles one at a time to the ranks that ask (so fast ranks take more), collects their
-// outcomes, and merges once every tile is integrated. With one rank, it runs the tiles itself.
+// for each stage (integrate, regularize, ..., sort) hands out tiles one at a time to the ranks
+// that ask (so fast ranks take more), starts the next stage once every tile has finished this one,
+// and merges at the end. With one rank, it runs the tiles itself.
 // Built only when CMake finds MPI (SCALEFUSE_HAVE_MPI).
 #include <mpi.h>
 
@@ -12,6 +13,7 @@
 #include "cli/commands.h"
 #include "engine/error.h"
 #include "scheduler/cluster.h"
+#include "scheduler/cluster_stage.h"
 
 namespace sf::cli {
 
@@ -89,54 +91,81 @@ void run_fuse_mpi(const FuseArgs& a, std::size_t tiles) {
   }
   const std::size_t n = read_cluster_plan(job).tiles.size();
 
-  // 2. Tiles: rank 0 hands them out; each other rank asks for one, runs it, reports, asks again.
+  // 2. Stages: for each stage in turn, rank 0 hands out the tiles one at a time; each other rank
+  // asks for work, runs it, reports, asks again. A rank that asks while the stage's last tiles
+  // are still running waits for the next stage (the barrier every stage needs).
+  const std::vector<std::string>& stages = tile_stages();
   std::vector<Outcome> failures;  // "tile K failed on rank R: why", with the tile's outcome code
+  const auto failed = [&](int stage, int tile, int rank, const Outcome& o) {
+    failures.push_back({o.code, "tile " + std::to_string(tile) + " failed on rank " + std::to_string(rank) +
+                                    " in stage " + stages[std::size_t(stage)] + ": " + o.message});
+    std::fprintf(stderr, "mpi: %s\n", failures.back().message.c_str());
+  };
   if (mpi.size == 1) {
-    for (std::size_t k = 0; k < n && failures.empty(); ++k) {
-      const Outcome o = attempt([&] { run_tile(job, long(k), tile_args); });
-      if (o.code != 0) failures.push_back({o.code, "tile " + std::to_string(k) + " failed on rank 0: " + o.message});
-    }
+    for (std::size_t s = 0; s < stages.size() && failures.empty(); ++s)
+      for (std::size_t k = 0; k < n && failures.empty(); ++k) {
+        const Outcome o = attempt([&] { run_tile(job, long(k), tile_args, stages[s]); });
+        if (o.code != 0) failed(int(s), int(k), 0, o);
+      }
   } else if (mpi.rank == 0) {
-    std::size_t next = 0;
+    std::size_t stage = 0, next = 0, running = 0;
+    std::vector<int> waiting;  // ranks that asked while the stage ends elsewhere
     int active = mpi.size - 1;
     while (active > 0) {
-      int report[2];  // tile (-1: none yet), outcome code
+      int report[3];  // stage, tile (-1: none yet), outcome code
       MPI_Status st;
-      MPI_Recv(report, 2, MPI_INT, MPI_ANY_SOURCE, kTagReport, MPI_COMM_WORLD, &st);
+      MPI_Recv(report, 3, MPI_INT, MPI_ANY_SOURCE, kTagReport, MPI_COMM_WORLD, &st);
       const int from = st.MPI_SOURCE;
-      if (report[0] >= 0 && report[1] != 0) {
-        int len = 0;
-        MPI_Recv(&len, 1, MPI_INT, from, kTagMessage, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-        std::string message(std::size_t(len), '\0');
-        if (len > 0) MPI_Recv(message.data(), len, MPI_CHAR, from, kTagMessage, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-        failures.push_back({report[1], "tile " + std::to_string(report[0]) + " failed on rank " + std::to_string(from) +
-                                           ": " + message});
-        std::fprintf(stderr, "mpi: %s\n", failures.back().message.c_str());
+      if (report[1] >= 0) {
+        --running;
+        if (report[2] != 0) {
+          int len = 0;
+          MPI_Recv(&len, 1, MPI_INT, from, kTagMessage, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+          Outcome o{report[2], std::string(std::size_t(len), '\0')};
+          if (len > 0) MPI_Recv(o.message.data(), len, MPI_CHAR, from, kTagMessage, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+          failed(report[0], report[1], from, o);
+        }
+      }
+      waiting.push_back(from);
+      // The stage is over when its last tile has reported: the next one starts.
+      if (failures.empty() && next == n && running == 0 && stage + 1 < stages.size()) {
+        ++stage;
+        next = 0;
+        if (!a.quiet) std::fprintf(stderr, "mpi: stage %s\n", stages[stage].c_str());
       }
       // After a failure no new tile starts: the merge cannot run, and the others' work is kept
-      // (their tiles are checkpointed) for a rerun.
-      int tile = -1;
-      if (failures.empty() && next < n) tile = int(next++);
-      MPI_Send(&tile, 1, MPI_INT, from, kTagTile, MPI_COMM_WORLD);
-      if (tile < 0) --active;
-      else if (!a.quiet) std::fprintf(stderr, "mpi: rank %d runs tile %d of %zu\n", from, tile, n);
+      // (checkpointed) for a rerun. Ranks leave when no work can come.
+      const bool over = !failures.empty() || (stage + 1 == stages.size() && next == n);
+      while (!waiting.empty() && (over || next < n)) {
+        const int rank = waiting.back();
+        waiting.pop_back();
+        int work[2] = {int(stage), -1};
+        if (!over) {
+          work[1] = int(next++);
+          ++running;
+        }
+        MPI_Send(work, 2, MPI_INT, rank, kTagTile, MPI_COMM_WORLD);
+        if (work[1] < 0) --active;
+        else if (!a.quiet && stage == 0) std::fprintf(stderr, "mpi: rank %d runs tile %d of %zu\n", rank, work[1], n);
+      }
     }
   } else {
-    int report[2] = {-1, 0};
+    int report[3] = {0, -1, 0};
     Outcome last;
     for (;;) {
-      MPI_Send(report, 2, MPI_INT, 0, kTagReport, MPI_COMM_WORLD);
-      if (report[0] >= 0 && report[1] != 0) {
+      MPI_Send(report, 3, MPI_INT, 0, kTagReport, MPI_COMM_WORLD);
+      if (report[1] >= 0 && report[2] != 0) {
         const int len = int(last.message.size());
         MPI_Send(&len, 1, MPI_INT, 0, kTagMessage, MPI_COMM_WORLD);
         if (len > 0) MPI_Send(last.message.data(), len, MPI_CHAR, 0, kTagMessage, MPI_COMM_WORLD);
       }
-      int tile = -1;
-      MPI_Recv(&tile, 1, MPI_INT, 0, kTagTile, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-      if (tile < 0) break;
-      last = attempt([&] { run_tile(job, tile, tile_args); });
-      report[0] = tile;
-      report[1] = last.code;
+      int work[2] = {0, -1};
+      MPI_Recv(work, 2, MPI_INT, 0, kTagTile, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+      if (work[1] < 0) break;
+      last = attempt([&] { run_tile(job, work[1], tile_args, stages[std::size_t(work[0])]); });
+      report[0] = work[0];
+      report[1] = work[1];
+      report[2] = last.code;
     }
   }
 

@@ -119,7 +119,47 @@ struct BrickInfo {
   std::uint32_t x, y, z;
 };
 
+
+// Each pass and the mailboxes it posts to (read by later passes only).
+const std::vector<std::pair<std::string, std::vector<std::string>>>& pass_outputs() {
+  static const std::vector<std::pair<std::string, std::vector<std::string>>> table = {
+      {"regularize", {"incoming", "tally_add"}},
+      {"prepare", {"survivors", "occupancy", "tally_prepare"}},
+      {"tetrahedralize", {"piece_voxels", "piece_cells", "offers", "tally_windows"}},
+      {"snap", {"snaps", "tally_snap"}},
+      {"march", {"requests", "piece_faces"}},
+      {"number", {"vertices", "ranks"}},
+      {"faces", {"homed_faces"}},
+      {"sort", {"final_faces", "tally_sort"}},
+      {"write", {}},
+  };
+  return table;
+}
+const std::vector<std::string>& outputs_of(const std::string& pass) {
+  for (const auto& [name, boxes] : pass_outputs())
+    if (name == pass) return boxes;
+  throw std::logic_error("extract: no pass " + pass);
+}
+int pass_index(const std::string& pass) {
+  const auto& t = pass_outputs();
+  for (std::size_t i = 0; i < t.size(); ++i)
+    if (t[i].first == pass) return int(i);
+  throw std::logic_error("extract: no pass " + pass);
+}
+
+// A shared extraction's stage ends after its pass (caught in run()).
+struct StageEnd {};
+
 }  // namespace
+
+const std::vector<std::string>& BrickExtraction::passes() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n;
+    for (const auto& p : pass_outputs()) n.push_back(p.first);
+    return n;
+  }();
+  return names;
+}
 
 struct BrickExtraction::Impl {
   std::filesystem::path scratch;
@@ -149,7 +189,18 @@ struct BrickExtraction::Impl {
     std::vector<std::uint64_t> finished;
     std::chrono::steady_clock::time_point last = std::chrono::steady_clock::now();
   };
-  Pass adding{"regularize", {"incoming", "tally_add"}};
+  Pass adding{"regularize", outputs_of("regularize")};
+  // A cluster tile's stage (ExtractShare): the passes before it are every tile's, read through
+  // union mailboxes of the tiles' manifests (box -> parts).
+  const ExtractShare* share = nullptr;
+  int stage = -1;
+  bool stage_manifest = false;  // this tile has finished the stage
+  std::map<std::string, std::vector<Mailbox::Part>> shared;
+  bool own_tile() const { return share && share->tile < share->folders.size(); }
+  std::filesystem::path manifest(const std::string& pass) const {
+    return share->folders[share->tile] / (pass + ".blobs");
+  }
+  void write_manifest(const Pass& p);
   mutable std::atomic<std::size_t> resumed{0};  // items skipped: an earlier run finished them
 
   // Set by prepare():
@@ -181,6 +232,12 @@ struct BrickExtraction::Impl {
   Mailbox& box(const std::string& name);
   void forget(const std::vector<std::string>& names);
   bool done_before(const std::string& pass, std::uint64_t item) const {
+    if (share) {
+      const int i = pass_index(pass);
+      if (i < stage) return true;  // every tile's, or the stage would not have started
+      if (i > stage) return false;
+      if (item == ExtractJournal::kWholePass) return stage_manifest;
+    }
     const auto it = finished_before.find(pass);
     return it != finished_before.end() && (it->second.count(item) || it->second.count(ExtractJournal::kWholePass));
   }
@@ -211,6 +268,10 @@ static void release_freed_memory() {
 Mailbox& BrickExtraction::Impl::box(const std::string& name) {
   std::lock_guard lock(boxes_mutex);
   std::unique_ptr<Mailbox>& b = boxes[name];
+  if (!b && share) {
+    const auto it = shared.find(name);
+    if (it != shared.end()) b = std::make_unique<Mailbox>(it->second);
+  }
   if (!b) {
     const auto it = committed.find(name);
     b = it != committed.end() ? std::make_unique<Mailbox>(scratch, name, it->second)
@@ -223,6 +284,19 @@ Mailbox& BrickExtraction::Impl::box(const std::string& name) {
 void BrickExtraction::Impl::forget(const std::vector<std::string>& names) {
   if (journal) journal->forget(names);
   std::lock_guard lock(boxes_mutex);
+  if (share) {
+    // Every tile has finished the passes that read these (this stage is later): each deletes its
+    // own files; unions never open them again.
+    for (const std::string& name : names) {
+      boxes.erase(name);
+      committed.erase(name);
+      if (own_tile()) {
+        std::error_code ec;
+        std::filesystem::remove(share->folders[share->tile] / (name + ".box"), ec);
+      }
+    }
+    return;
+  }
   for (const std::string& name : names) {
     const auto it = boxes.find(name);
     if (it != boxes.end()) {
@@ -240,6 +314,7 @@ void BrickExtraction::Impl::commit(Pass& p, bool whole) {
   p.last = std::chrono::steady_clock::now();
   if (!journal) {
     p.finished.clear();
+    if (whole && share && pass_index(p.name) == stage) write_manifest(p);
     return;
   }
   std::sort(p.finished.begin(), p.finished.end());
@@ -249,6 +324,15 @@ void BrickExtraction::Impl::commit(Pass& p, bool whole) {
   if (whole) p.finished.push_back(ExtractJournal::kWholePass);
   journal->commit(p.name, p.finished, records);
   p.finished.clear();
+  if (whole && share && pass_index(p.name) == stage) write_manifest(p);
+}
+
+void BrickExtraction::Impl::write_manifest(const Pass& p) {
+  std::vector<BlobRecord> records;
+  for (const std::string& name : p.outputs)
+    for (const Mailbox::Blob& b : box(name).blobs()) records.push_back({name, b});
+  write_blob_manifest(manifest(p.name), records);
+  stage_manifest = true;
 }
 
 void BrickExtraction::Impl::finish(Pass& p, std::uint64_t item) {
@@ -262,17 +346,23 @@ void BrickExtraction::Impl::finish(Pass& p, std::uint64_t item) {
 void BrickExtraction::Impl::run_pass(Pass& p, const std::vector<std::uint64_t>& items,
                                      const std::function<void(std::size_t)>& fn, const ProgressFn& progress,
                                      const char* stage) {
+  const bool this_stage = share && pass_index(p.name) == this->stage;
+  if (share && pass_index(p.name) > this->stage) throw std::logic_error("extract: pass " + p.name + " after the stage");
+  if (share && !this_stage) return;  // every tile's, before this stage
   if (stage) report(progress, stage, 0, double(items.size()));
   if (done_before(p.name, ExtractJournal::kWholePass)) {
     resumed += items.size();
     if (stage) report(progress, stage, double(items.size()), double(items.size()));
+    if (this_stage) throw StageEnd{};
     return;
   }
   for (const std::string& name : p.outputs) box(name);  // made before the threads post to them
   std::atomic<std::size_t> done{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, items.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t k = r.begin(); k != r.end(); ++k) {
-      if (!done_before(p.name, items[k])) {
+      if (share && !share->owns(items[k])) {
+        // another tile's
+      } else if (!done_before(p.name, items[k])) {
         fn(k);
         finish(p, items[k]);
       } else {
@@ -281,13 +371,17 @@ void BrickExtraction::Impl::run_pass(Pass& p, const std::vector<std::uint64_t>& 
       if (stage) report(progress, stage, double(++done), double(items.size()));
     }
   });
-  std::lock_guard lock(p.mutex);
-  commit(p, true);
+  {
+    std::lock_guard lock(p.mutex);
+    commit(p, true);
+  }
   release_freed_memory();
+  if (this_stage) throw StageEnd{};
 }
 
 BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level,
-                                 const ExtractOptions& options, std::size_t memory_budget, ExtractJournal* journal)
+                                 const ExtractOptions& options, std::size_t memory_budget, ExtractJournal* journal,
+                                 const ExtractShare* share)
     : impl_(std::make_unique<Impl>()) {
   options.check();
   if (brick_level < 0 || brick_level > kMaxLevel)
@@ -304,7 +398,40 @@ BrickExtraction::BrickExtraction(std::filesystem::path scratch, const RootCube& 
     for (const auto& [pass, item] : journal->finished()) impl_->finished_before[pass].insert(item);
     for (const ExtractJournal::Record& r : journal->blobs()) impl_->committed[r.box].push_back(r.blob);
   }
+  if (share) {
+    Impl& m = *impl_;
+    m.share = share;
+    m.stage = pass_index(share->stage);
+    if (m.own_tile()) {
+      if (m.scratch != share->folders[share->tile]) throw std::logic_error("extract: a tile's scratch is its folder");
+      m.stage_manifest = std::filesystem::exists(m.manifest(share->stage));
+    }
+    // The passes before the stage, from every tile's manifests.
+    for (int p = 0; p < m.stage; ++p) {
+      const std::string& pass = pass_outputs()[std::size_t(p)].first;
+      std::map<std::string, Mailbox::Part> parts;  // of one tile
+      for (std::size_t t = 0; t < share->folders.size(); ++t) {
+        const std::filesystem::path file = share->folders[t] / (pass + ".blobs");
+        if (!std::filesystem::exists(file))
+          throw StageNotReady("tile " + std::to_string(t) + " has not finished stage " + pass + " (no " + file.string() +
+                              ")");
+        parts.clear();
+        for (BlobRecord& r : read_blob_manifest(file)) {
+          Mailbox::Part& part = parts[r.box];
+          part.file = share->folders[t] / (r.box + ".box");
+          part.blobs.push_back(r.blob);
+        }
+        for (const std::string& box : outputs_of(pass)) {
+          std::vector<Mailbox::Part>& all = m.shared[box];  // made even if no tile posted to it
+          const auto it = parts.find(box);
+          if (it != parts.end()) all.push_back(std::move(it->second));
+        }
+      }
+    }
+  }
 }
+
+bool BrickExtraction::stage_finished() const { return impl_->stage_manifest; }
 
 BrickExtraction::~BrickExtraction() {
   const std::filesystem::path scratch = impl_->scratch;
@@ -322,6 +449,7 @@ bool BrickExtraction::all_added_before() const {
   return impl_->done_before("regularize", ExtractJournal::kWholePass);
 }
 void BrickExtraction::all_added() {
+  if (impl_->share && impl_->stage > 0) return;  // every tile did
   std::lock_guard lock(impl_->adding.mutex);
   impl_->box("incoming");  // even if nothing was added
   impl_->box("tally_add");
@@ -405,7 +533,7 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
   side = std::int64_t{1} << G;
   brick_side = std::int64_t{1} << (G - B);
   occ.side = std::max<std::int64_t>(1, brick_side / 8);
-  Pass pass{"prepare", {"survivors", "occupancy", "tally_prepare"}};
+  Pass pass{"prepare", outputs_of("prepare")};
   Mailbox& incoming = box("incoming");
   const std::vector<std::uint64_t> codes = incoming.destinations();
   run_pass(pass, codes, [&](std::size_t bi) {
@@ -459,6 +587,7 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
   std::sort(codes_kept.begin(), codes_kept.end());
   for (std::uint64_t code : codes_kept)
     bricks.push_back({code, compact_bits(code), compact_bits(code >> 1), compact_bits(code >> 2)});
+  if (done_before("tetrahedralize", ExtractJournal::kWholePass)) return;  // (its only reader; gone)
   occ.cells = box("occupancy").collect<std::uint64_t>(0);
   tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
   occ.cells.erase(std::unique(occ.cells.begin(), occ.cells.end()), occ.cells.end());
@@ -466,6 +595,15 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
 }
 
 void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractStats* stats) {
+  if (impl_->share && impl_->stage == 0) throw std::logic_error("extract: the regularize stage adds, it does not run");
+  try {
+    run_passes(out, progress, stats);
+  } catch (const StageEnd&) {
+    // this tile's stage is done
+  }
+}
+
+void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, ExtractStats* stats) {
   Impl& m = *impl_;
   ExtractStats st;
   st.by_brick = true;
@@ -478,7 +616,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
   const auto brick_axis_of = [&](std::int64_t p) { return std::min<std::int64_t>(p / brick_side, last_brick); };
 
   // --- Pass 1: windows -------------------------------------------------------------------------
-  Impl::Pass windows_pass{"tetrahedralize", {"piece_voxels", "piece_cells", "offers", "tally_windows"}};
+  Impl::Pass windows_pass{"tetrahedralize", outputs_of("tetrahedralize")};
   Mailbox &piece_voxels = m.box("piece_voxels"), &piece_cells = m.box("piece_cells"), &offers = m.box("offers");
   struct Counters {
     std::uint64_t tetrahedra, kept, windows, points, regrown, split, rejected, in_cubes;
@@ -907,7 +1045,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
   // --- Pass 2: snaps ---------------------------------------------------------------------------
   constexpr double kStages = 5;  // "extract" steps: snap, march, number, faces, write
   report(progress, "extract", 0, kStages);
-  Impl::Pass snap_pass{"snap", {"snaps", "tally_snap"}};
+  Impl::Pass snap_pass{"snap", outputs_of("snap")};
   Mailbox& snaps = m.box("snaps");
   {
     const std::vector<std::uint64_t> dests = offers.destinations();
@@ -940,7 +1078,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
 
   // --- Pass 3: march ---------------------------------------------------------------------------
   report(progress, "extract", 1, kStages);
-  Impl::Pass march_pass{"march", {"requests", "piece_faces"}};
+  Impl::Pass march_pass{"march", outputs_of("march")};
   Mailbox &requests = m.box("requests"), &piece_faces = m.box("piece_faces");
   {
     const std::vector<std::uint64_t> pieces = piece_cells.destinations();
@@ -1052,7 +1190,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
 
   // --- Pass 4: number each home brick's vertices -------------------------------------------------
   report(progress, "extract", 2, kStages);
-  Impl::Pass number_pass{"number", {"vertices", "ranks"}};
+  Impl::Pass number_pass{"number", outputs_of("number")};
   Mailbox &vertices = m.box("vertices"), &ranks = m.box("ranks");
   {
     const std::vector<std::uint64_t> homes = requests.destinations();
@@ -1107,7 +1245,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
 
   // --- Pass 5: faces in global numbers, to the home of their smallest vertex -----------------------
   report(progress, "extract", 3, kStages);
-  Impl::Pass faces_pass{"faces", {"homed_faces"}};
+  Impl::Pass faces_pass{"faces", outputs_of("faces")};
   Mailbox& homed_faces = m.box("homed_faces");
   {
     const std::vector<std::uint64_t> pieces = piece_faces.destinations();
@@ -1146,7 +1284,7 @@ void BrickExtraction::run(MeshStream& out, const ProgressFn& progress, ExtractSt
   m.forget({"ranks", "piece_faces"});
 
   // --- Pass 6: each home's faces sorted, interior zero faces cancelled ---------------------------
-  Impl::Pass sort_pass{"sort", {"final_faces", "tally_sort"}};
+  Impl::Pass sort_pass{"sort", outputs_of("sort")};
   Mailbox& final_faces = m.box("final_faces");
   {
     const std::vector<std::uint64_t> homes = homed_faces.destinations();

@@ -32,11 +32,13 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "engine/error.h"
 #include "engine/extract/extract.h"
 #include "engine/geometry.h"
 #include "engine/mesh.h"
@@ -72,14 +74,39 @@ class ExtractJournal {
   virtual double commit_seconds() const = 0;
 };
 
+// A cluster tile's part of a brick extraction (docs/cluster.md): one process per pass (a
+// "stage"), every tile running it over the items of its own bricks, with the cluster engine's
+// barrier between passes (Slurm dependencies, MPI rank 0's bookkeeping). Each tile posts to
+// mailboxes in its own folder and, once it has finished a pass, writes `<pass>.blobs` there (what
+// it posted, storage/mailbox.h); later passes read the union of every tile's mailboxes. Every
+// record is posted by the item it belongs to, in the same order as on one machine, so the mesh is
+// the single-machine mesh byte for byte.
+struct ExtractShare {
+  std::vector<std::filesystem::path> folders;  // every tile's exchange folder, by tile
+  std::size_t tile = 0;                        // this process's tile; folders.size(): none (the merge)
+  std::function<bool(std::uint64_t brick_code)> owns;  // whether a brick (Morton code) is this tile's
+  std::string stage;                           // the pass to run, one of BrickExtraction::passes()
+};
+
+// A pass of a shared extraction has not been finished by some tile.
+class StageNotReady : public InputError {
+ public:
+  using InputError::InputError;
+};
+
 class BrickExtraction {
  public:
+  // The passes in order: "regularize" (add), then run()'s, the last one "write" (the stream).
+  static const std::vector<std::string>& passes();
+
   // Scratch files go to `scratch` (created; removed when done, unless there is a journal: then
   // the journal's owner removes them). Of `memory_budget`, a quarter holds decoded bricks for the
   // windows and 40 % the windows' triangulations in flight (a window larger than that runs
   // alone; one larger than half of that is split between its owners where it can be).
+  // With `share` (a cluster tile's stage), `scratch` is the tile's folder (share->folders[tile]);
+  // throws StageNotReady naming a tile that has not finished an earlier pass.
   BrickExtraction(std::filesystem::path scratch, const RootCube& root, int brick_level, const ExtractOptions& options,
-                  std::size_t memory_budget, ExtractJournal* journal = nullptr);
+                  std::size_t memory_budget, ExtractJournal* journal = nullptr, const ExtractShare* share = nullptr);
   ~BrickExtraction();
   BrickExtraction(const BrickExtraction&) = delete;
   BrickExtraction& operator=(const BrickExtraction&) = delete;
@@ -100,9 +127,14 @@ class BrickExtraction {
 
   // Runs the passes in the calling TBB arena and streams the mesh to `out`. Throws InputError on
   // an invalid, duplicated or non-finite voxel, or when fewer than 4 voxels were added.
+  // With a share: runs the stage's pass over this tile's bricks and returns (`out` and `stats`
+  // untouched) unless the stage is "write".
   void run(MeshStream& out, const ProgressFn& progress, ExtractStats* stats);
+  // With a share: whether this tile has finished the stage (its `<pass>.blobs` exists).
+  bool stage_finished() const;
 
  private:
+  void run_passes(MeshStream& out, const ProgressFn& progress, ExtractStats* stats);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Slurm (issue 5): a single-host Slurm (munged, slurmctld, slurmd; ../shared/recipes) runs a planned
-# job as a 4-task array plus a dependent merge, byte-identical to the single-process mesh; a failing
-# tile fails the array and the merge is cancelled, writing nothing. Needs root and the Debian
+# job as one 4-task array per stage (integrate, regularize, ..., sort; each after the one before with
+# afterok) plus a dependent merge, byte-identical to the single-process mesh; a failing tile fails
+# its array, and the later stages and the merge are cancelled, writing nothing. Needs root and the Debian
 # packages slurmctld slurmd slurm-client munge; skipped (77) without them.
 # Usage: slurm_test.sh SCALEFUSE SHARED_DATA WORK
 set -euo pipefail
@@ -93,7 +94,7 @@ wait_for_jobs() {
 }
 state_of() { timeout 5 scontrol -o show job "$1" | grep -o 'JobState=[A-Z_]*' | sort -u | tr '\n' ' '; }
 
-# --- 4 tiles as an array, then the merge ---------------------------------------------------------
+# --- 4 tiles as an array per stage, then the merge ---------------------------------------------------------
 "$BIN" plan "$SCENE" --tiles 4 --job "$W/ok.job" -o "$W/ok.ply" -q "${FUSE_ARGS[@]}" > /dev/null
 "$BIN" slurm "$W/ok.job" --cpus 1 --mem 1G --time 20:00 --partition ci --submit
 read -r TILES MERGE < "$W/ok.job/slurm/submitted"
@@ -111,5 +112,9 @@ merge_state=$(state_of "$MERGE")
 [[ $tiles_state == *FAILED* ]] || fail "the array's states are '$tiles_state', expected a FAILED task"
 [[ $merge_state == *CANCELLED* ]] || fail "the merge's state is '$merge_state', expected CANCELLED"
 [ ! -e "$W/bad.ply" ] || fail "a mesh was written although a tile failed"
-grep -q "failure injected" "$W/bad.job/slurm/tile-1.log" || fail "tile 1's log does not say why it failed"
+grep -q "failure injected" "$W/bad.job/slurm/integrate-1.log" || fail "tile 1's log does not say why it failed"
+# The later stages' arrays never ran: cancelled with the merge.
+last_stage=$(sed -n 's/^stages:.* \([0-9]*\)$/\1/p' "$W/bad.job/slurm/submitted")
+[ -n "$last_stage" ] || fail "submitted lists no stage arrays"
+[[ $(state_of "$last_stage") == *CANCELLED* ]] || fail "the last stage's array is '$(state_of "$last_stage")', expected CANCELLED"
 echo "ok: a failing tile fails the array ($tiles_state) and cancels the merge ($merge_state)"
