@@ -82,7 +82,7 @@ for k, t in enumerate(plan["tiles"]):
     s = json.load(open(f"{work}/t{n}.{k}.json"))
     # bounds pass (one read each) + plan and integration reads (stats)
     reads = len(frames) + s["frame_reads"]
-    per = sum(size[f] for f in frames) / len(frames)
+    per = sum(size.values()) / len(size)  # frames are source indices (input.frame_step): the mean size
     gib = reads * per / 2**30
     print(f"  {k:4d}  {len(frames):10d}  {reads:5d}  {gib:8.2f}  {float(w):7.1f}  {int(r)/1024:8.0f}  {s['seconds']['integrate']:11.1f}  {s['tiles']:11d}")
     tw += float(w); tr += reads; tb += gib

@@ -103,6 +103,11 @@ bool run_tile_stage(const TileStageContext& c, std::size_t tile, const std::stri
       throw StageNotReady("tile " + std::to_string(t) + " has not finished stage " + before + "; run it first: scalefuse run-tile " +
                           std::filesystem::absolute(c.job_dir).string() + " --stage " + before + " --tile " +
                           std::to_string(t));
+  if (stage != "regularize") {
+    // Only the regularization reads the boundaries, and every tile has finished it.
+    std::error_code ec;
+    for (const char* box : {"coarse.box", "faces.box"}) std::filesystem::remove(tile_boundary_dir(c.job_dir, tile) / box, ec);
+  }
   const ClusterPlan::Tile& own = c.plan.tiles[tile];
   const std::filesystem::path exchange = tile_exchange_dir(c.job_dir, tile);
   // The tile's job journal records the bricks each stage finished, so that a killed stage

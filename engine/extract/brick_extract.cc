@@ -119,7 +119,6 @@ struct BrickInfo {
   std::uint32_t x, y, z;
 };
 
-
 // Each pass and the mailboxes it posts to (read by later passes only).
 const std::vector<std::pair<std::string, std::vector<std::string>>>& pass_outputs() {
   static const std::vector<std::pair<std::string, std::vector<std::string>>> table = {
@@ -286,14 +285,15 @@ void BrickExtraction::Impl::forget(const std::vector<std::string>& names) {
   std::lock_guard lock(boxes_mutex);
   if (share) {
     // Every tile has finished the passes that read these (this stage is later): each deletes its
-    // own files; unions never open them again.
+    // own files, and the merge (every stage done) what is left of anyone's; unions never open
+    // them again.
     for (const std::string& name : names) {
       boxes.erase(name);
       committed.erase(name);
-      if (own_tile()) {
-        std::error_code ec;
-        std::filesystem::remove(share->folders[share->tile] / (name + ".box"), ec);
-      }
+      std::error_code ec;
+      if (own_tile()) std::filesystem::remove(share->folders[share->tile] / (name + ".box"), ec);
+      else
+        for (const std::filesystem::path& folder : share->folders) std::filesystem::remove(folder / (name + ".box"), ec);
     }
     return;
   }
