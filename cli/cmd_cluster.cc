@@ -106,6 +106,8 @@ void run_plan(const FuseArgs& a, std::size_t tiles) {
     });
     printer.finish();
   }
+  std::filesystem::create_directories(dir);
+  report_skipped(*source, dir);
   // The job: its inputs (identities), octree and configuration, as a single-machine fuse records
   // them; the merge resumes it.
   JobOptions jo;
@@ -195,7 +197,7 @@ void run_tile(const std::string& job_dir, long tile_number, const FuseArgs& opti
   args.output = job.output;  // not written: a tile run stops after integration
   args.job = tile_dir.string();
   args.config = (dir / "config.toml").string();
-  args.tile = FuseArgs::TileRun{std::size_t(k), tile.frames, tile.box, plan.root, plan.brick_level};
+  args.tile = FuseArgs::TileRun{std::size_t(k), tile.frames, tile.box, plan.root, plan.brick_level, dir / "plan.json"};
   run_fuse(args);
   boundary();  // what the neighbouring tiles' regularization needs of this one
 }
@@ -347,6 +349,7 @@ void add_cluster_commands(CLI::App& app) {
     cmd->add_option("--brick-size", a.brick_size, "brick edge in metres at most");
     cmd->add_option("--extract", a.extract_mode, "tetrahedralization of the merge: global | bricks | auto");
     cmd->add_option("--threads", a.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+    cmd->add_flag("--skip-bad", a.skip_bad, "skip depth maps that fail to read (= --set job.skip_bad=true; the tiles skip them too)");
     cmd->add_flag("-q,--quiet", a.quiet, "no progress");
     cmd->callback([pa] { run_plan(pa->fuse, pa->tiles); });
   }

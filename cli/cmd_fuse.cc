@@ -20,6 +20,7 @@
 #include "engine/error.h"
 #include "engine/fusion.h"
 #include "engine/input/follow_source.h"
+#include "engine/input/skipping_source.h"
 #include "engine/meshio/ply_io.h"
 #include "engine/vdb_export.h"
 #include "scheduler/job.h"
@@ -229,8 +230,13 @@ FusionOptions fusion_options(const FuseArgs& a, ParameterSet& params) {
   shorthand(a.bbox, "octree.bbox");
   shorthand(a.extract_mode, "extract.mode");
   shorthand(a.brick_size, "octree.brick_size");
+  if (a.skip_bad) params.set("job.skip_bad", "true", "--skip-bad");
   for (const auto& s : a.sets) params.set_assignment(s);
-  options.check();
+  try {
+    options.check();
+  } catch (const InputError& e) {
+    throw InputError(params.with_origin(e.what()));
+  }
   if (!a.quiet || a.print_params) std::fprintf(stderr, "effective parameters:\n%s", params.describe().c_str());
   return options;
 }
@@ -243,7 +249,36 @@ std::unique_ptr<FrameSource> open_inputs(const FuseArgs& a, const FusionOptions&
     parts.push_back(open_input(more, options.input));
     *input_abs += "\n" + std::filesystem::absolute(more).string();
   }
-  return concatenate_inputs(std::move(parts));
+  std::unique_ptr<FrameSource> source = concatenate_inputs(std::move(parts));
+  if (options.input.skip_bad) return std::make_unique<SkippingSource>(std::move(source));
+  return source;
+}
+
+std::vector<SkippedFrame> report_skipped(const FrameSource& source, const std::filesystem::path& job_dir) {
+  const auto* skipping = dynamic_cast<const SkippingSource*>(&source);
+  if (!skipping) return {};
+  std::vector<SkippedFrame> skipped = skipping->skipped();
+  const std::filesystem::path list = job_dir / "skipped.txt";
+  std::error_code ec;
+  if (skipped.empty()) {
+    std::filesystem::remove(list, ec);
+    return skipped;
+  }
+  write_text_atomically(list, describe_skipped(skipped));
+  // Even with -q: the user asked to go on past bad files and must learn which.
+  std::fprintf(stderr, "skipped %zu bad depth map%s (listed in %s):\n", skipped.size(), skipped.size() == 1 ? "" : "s",
+               std::filesystem::absolute(list).c_str());
+  const std::size_t shown = std::min<std::size_t>(skipped.size(), 20);
+  for (std::size_t i = 0; i < shown; ++i)
+    std::fprintf(stderr, "  %s\n", describe_skipped(skipped[i]).c_str());
+  if (shown < skipped.size()) std::fprintf(stderr, "  ... and %zu more\n", skipped.size() - shown);
+  return skipped;
+}
+
+nlohmann::json skipped_json(const std::vector<SkippedFrame>& skipped) {
+  nlohmann::json j = nlohmann::json::array();
+  for (const SkippedFrame& s : skipped) j.push_back({{"file", s.file}, {"error", s.error}});
+  return j;
 }
 
 void run_fuse(const FuseArgs& a) {
@@ -279,12 +314,19 @@ void run_fuse(const FuseArgs& a) {
     follow = fs.get();
     follow->rescan();
     source = std::move(fs);
+    if (options.input.skip_bad) source = std::make_unique<SkippingSource>(std::move(source));
     if (a.follow && !a.quiet)
       std::fprintf(stderr, "following %s: integrating depth maps as they complete; stop with: touch %s (or SIGTERM)\n",
                    input_abs.c_str(), std::filesystem::absolute(stop_file).c_str());
   } else {
     source = open_inputs(a, options, &input_abs);
   }
+  if (a.tile)
+    for (std::size_t i : a.tile->frames)
+      if (i >= source->size())
+        throw input_error(a.tile->plan_file.string(), "tile " + std::to_string(a.tile->tile) + " names depth map " +
+                                                          std::to_string(i) + ", the input has " +
+                                                          std::to_string(source->size()));
   job_options.memory_limit = a.memory_limit.empty() ? default_memory_limit() : parse_byte_size(a.memory_limit, "--memory-limit");
   job_options.checkpoint_every = a.checkpoint_every;
   job_options.checkpoint_seconds = a.checkpoint_seconds;
@@ -308,6 +350,7 @@ void run_fuse(const FuseArgs& a) {
       std::filesystem::remove_all(job_options.dir);
     }
   }
+  std::vector<SkippedFrame> skipped;
   auto run_job = [&](Job& job, MeshCounts& mesh, FusionStats& stats) -> bool {
     write_text_atomically(job.dir() / "config.toml",
                           "# effective configuration of this job (scalefuse resume reads it)\n" + params.assignments());
@@ -347,11 +390,19 @@ void run_fuse(const FuseArgs& a) {
       arena.execute([&] { fuse(*source, options, hooks, &stats, &job); });
     } catch (const Interrupted& e) {
       printer.finish();
+      report_skipped(*source, job.dir());
       throw JobInterrupted(std::string(e.what()) + "; checkpoint written; continue with: scalefuse resume " +
                                std::filesystem::absolute(job.dir()).string(),
                            g_signal.load());
+    } catch (const InputError& e) {
+      printer.finish();
+      const std::vector<SkippedFrame> bad = report_skipped(*source, job.dir());
+      if (bad.empty()) throw;
+      throw InputError(std::string(e.what()) + " (" + std::to_string(bad.size()) + " of " +
+                       std::to_string(source->size()) + " depth maps were skipped as bad)");
     }
     printer.finish();
+    skipped = report_skipped(*source, job.dir());
     return !hooks.stop_after_integration;
   };
   // An implicit job whose depth maps changed is started over (once); an explicit one is refused.
@@ -359,6 +410,9 @@ void run_fuse(const FuseArgs& a) {
   FusionStats stats;
   MeshCounts mesh;
   bool extracted = false;
+  // A job this run created and that stopped on bad input before integrating anything holds no work:
+  // remove it rather than leave an empty job behind (nothing of a failed run remains).
+  const bool job_existed = std::filesystem::exists(job_options.dir);
   for (int attempt = 0;; ++attempt) {
     job_holder.emplace(job_options, identity, input_abs, output_abs);
     try {
@@ -369,13 +423,28 @@ void run_fuse(const FuseArgs& a) {
       if (!a.quiet) std::fprintf(stderr, "starting over: %s\n", e.what());
       job_holder.reset();
       std::filesystem::remove_all(job_options.dir);
+    } catch (const InputError&) {
+      job_holder.reset();  // releases the lock
+      if (!job_existed && !job_options.follow) {
+        std::error_code ec;
+        bool empty = false;
+        try {
+          empty = Job::status(job_options.dir).integrated == 0;
+        } catch (const std::exception&) {
+        }
+        if (empty && !std::filesystem::exists(job_options.dir / "skipped.txt", ec))
+          std::filesystem::remove_all(job_options.dir, ec);
+      }
+      throw;
     }
   }
   Job& job = *job_holder;
   auto write_stats = [&] {
     if (a.stats_json.empty()) return;
     const std::string tmp = a.stats_json + ".tmp";
-    std::ofstream(tmp) << stats_json(stats, mesh).dump(2) << "\n";
+    nlohmann::json j = stats_json(stats, mesh);
+    if (options.input.skip_bad) j["skipped"] = skipped_json(skipped);
+    std::ofstream(tmp) << j.dump(2) << "\n";
     std::filesystem::rename(tmp, a.stats_json);
   };
   if (!extracted && a.tile) {
@@ -443,6 +512,9 @@ void add_fuse_command(CLI::App& app) {
   cmd->add_option("--poll-seconds", args->poll_seconds, "with --follow: look at the folder this often (default 1)")
       ->check(CLI::PositiveNumber);
   add_job_options(cmd, *args);
+  cmd->add_flag("--skip-bad", args->skip_bad,
+                "skip depth maps that fail to read instead of stopping (they are listed at the end and in "
+                "JOB/skipped.txt; = --set job.skip_bad=true)");
   cmd->add_flag("--print-params", args->print_params, "print the effective parameters and exit");
   cmd->add_flag("--integrate-only", args->integrate_only,
                 "stop once every depth map is integrated and checkpointed; `scalefuse resume DIR` extracts");

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "engine/fusion.h"
+#include "engine/input/skipping_source.h"
 #include "engine/mesh.h"
 #include "engine/parameters.h"
 
@@ -32,6 +33,7 @@ struct FuseArgs {
   std::size_t checkpoint_every = 200;
   double checkpoint_seconds = 300;
   bool quiet = false, print_params = false;
+  bool skip_bad = false;                 // --skip-bad (job.skip_bad)
   bool integrate_only = false;           // stop after the integration's checkpoint (resume extracts)
   // A cluster tile's run (scalefuse run-tile): only the plan's depth maps for the tile, only into
   // its bricks, in the plan's octree; stops once integrated.
@@ -41,6 +43,7 @@ struct FuseArgs {
     BrickBox region;
     RootCube root;
     int brick_level = 0;
+    std::filesystem::path plan_file;  // JOB/plan.json, for messages
   };
   std::optional<TileRun> tile;
   // fuse --mpi --tiles N: plan N tiles, run them on MPI ranks, merge (docs/cluster.md).
@@ -54,6 +57,9 @@ void run_fuse(const FuseArgs& args);
 FusionOptions fusion_options(const FuseArgs& args, ParameterSet& params);
 // The input folders of `args` as one source; `input_abs` gets their absolute names, one per line.
 std::unique_ptr<FrameSource> open_inputs(const FuseArgs& args, const FusionOptions& options, std::string* input_abs);
+// With job.skip_bad (the source is a SkippingSource): writes what was skipped to JOB/skipped.txt
+// (removed when nothing was), prints it, and returns it; otherwise nothing.
+std::vector<SkippedFrame> report_skipped(const FrameSource& source, const std::filesystem::path& job_dir);
 // Parameters that shape the integrated field (a job refuses to resume when they change).
 extern const std::vector<std::string> kIntegrationParameters;
 std::size_t default_memory_limit();

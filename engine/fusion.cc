@@ -46,6 +46,8 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
   s.add("input.rgbd_depth_scale", &o.input.rgbd_depth_scale, "m/unit", "metres per depth-PNG unit");
   s.add("input.rgbd_use_colour", &o.input.rgbd_use_colour, "", "colour RGB-D meshes from *.color.png|jpg");
   s.add("input.frame_step", &o.input.frame_step, "maps", "fuse every n-th depth map (1 = all)");
+  // Not input.*: skipping changes no successful job's result, so a job may resume with it turned on.
+  s.add("job.skip_bad", &o.input.skip_bad, "", "skip depth maps that fail to read (listed in JOB/skipped.txt)");
   s.add("triangulate.rho", &o.triangulate.rho, "footprints", "depth discontinuity threshold ρ");
   s.add("integrate.lambda", &o.integrate.lambda, "", "sampling rate λ (equation 1)");
   s.add("integrate.gamma", &o.integrate.gamma, "cells", "ramp size factor γ: ramp = γ × cell size");

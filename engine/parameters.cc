@@ -2,8 +2,11 @@
 
 #include <toml++/toml.h>
 
+#include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <sstream>
 
 #include "engine/error.h"
@@ -50,6 +53,7 @@ void ParameterSet::set(const std::string& name, const std::string& value, const 
   Parameter* p = find(name);
   if (!p) throw input_error(origin, "unknown parameter '" + name + "' (see the effective parameters printed by fuse)");
   auto bad = [&](const char* what) { return input_error(origin, name + " expects " + what + ", got '" + value + "'"); };
+  p->origin = origin;
   std::visit(
       [&](auto* target) {
         using T = std::remove_pointer_t<decltype(target)>;
@@ -82,7 +86,19 @@ void ParameterSet::set_assignment(const std::string& assignment) {
   set(assignment.substr(0, eq), assignment.substr(eq + 1), "--set");
 }
 
+std::string ParameterSet::with_origin(const std::string& message) const {
+  const Parameter* best = nullptr;
+  for (const auto& p : params_)
+    if (message.rfind(p.name, 0) == 0 && (!best || p.name.size() > best->name.size())) best = &p;
+  if (!best || best->origin.empty()) return message;
+  return best->origin + ": " + message;
+}
+
 void ParameterSet::load_toml(const std::filesystem::path& path) {
+  if (std::ifstream probe(path); !probe) {
+    const int error = errno;
+    throw input_error(path.string(), std::string("cannot open file: ") + (error ? std::strerror(error) : "unknown reason"));
+  }
   toml::table root;
   try {
     root = toml::parse_file(path.string());

@@ -20,6 +20,7 @@ class ParameterSet {
   struct Parameter {
     std::string name, unit, help;
     Target target;
+    std::string origin;  // where its value was last set (a config file, "--set", ...); empty: default
   };
 
   void add(std::string name, Target target, std::string unit, std::string help);
@@ -32,6 +33,9 @@ class ParameterSet {
   void load_toml(const std::filesystem::path& path);
 
   std::string value_text(const Parameter& p) const;
+  // A check's message ("integrate.lambda must be > 0, got -1") prefixed with where the parameter
+  // it starts with was set, so the user learns which file to fix; unchanged if none was.
+  std::string with_origin(const std::string& message) const;
   const std::vector<Parameter>& parameters() const { return params_; }
   // "name = value  # unit: help" lines, in registration order.
   std::string describe() const;

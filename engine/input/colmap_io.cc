@@ -23,7 +23,7 @@ constexpr std::string_view kModelNames[] = {
 
 std::string model_name(int id) {
   if (id >= 0 && id < int(std::size(kModelNames))) return std::string(kModelNames[id]);
-  return "model id " + std::to_string(id);
+  return "with id " + std::to_string(id);
 }
 
 // Width/height sanity bound: far beyond any camera, small enough that W*H cannot overflow.
@@ -73,8 +73,13 @@ void finish_images(const fs::path& path, const std::vector<ColmapImage>& images)
     if (!names.insert(im.name).second) throw input_error(path.string(), "duplicate image name \"" + im.name + "\"");
     if (im.name.empty()) throw input_error(path.string(), "image " + std::to_string(im.id) + " has an empty name");
     const double qn = im.qvec.norm();
-    if (!std::isfinite(qn) || qn < 1e-6 || !im.tvec.allFinite())
-      throw input_error(path.string(), "image " + std::to_string(im.id) + " has an invalid pose");
+    const std::string which = "image " + std::to_string(im.id) + " (" + im.name + ")";
+    if (!std::isfinite(qn) || qn < 1e-6)
+      throw input_error(path.string(), which + ": its rotation quaternion has length " + std::to_string(qn) +
+                                           " (a rotation needs a finite, non-zero quaternion)");
+    if (!im.tvec.allFinite())
+      throw input_error(path.string(), which + ": its translation is not finite (" + std::to_string(im.tvec.x()) +
+                                           " " + std::to_string(im.tvec.y()) + " " + std::to_string(im.tvec.z()) + ")");
   }
 }
 

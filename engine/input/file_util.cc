@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <stdexcept>
 #include <system_error>
@@ -20,8 +22,9 @@ std::vector<std::uint8_t> read_file_bytes(const fs::path& path) {
   if (!fs::is_regular_file(path, ec)) throw input_error(path.string(), "missing file");
   const std::uintmax_t size = fs::file_size(path, ec);
   if (ec) throw input_error(path.string(), "cannot read file size: " + ec.message());
+  errno = 0;
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw input_error(path.string(), "cannot open file");
+  if (!in) throw input_error(path.string(), std::string("cannot open file: ") + (errno ? std::strerror(errno) : "unknown reason"));
   std::vector<std::uint8_t> bytes(size);
   if (size > 0 && !in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(size)))
     throw input_error(path.string(), "cannot read file");
@@ -86,7 +89,14 @@ std::vector<Rgb8> sample_colour(const Image8& image, int width, int height) {
   return out;
 }
 
+void check_depth_size(const fs::path& path, long long width, long long height) {
+  if (width >= 2 && height >= 2) return;
+  throw input_error(path.string(), "a depth map of " + std::to_string(width) + "x" + std::to_string(height) +
+                                       " samples holds no triangle (at least 2x2 needed)");
+}
+
 void check_depths(const fs::path& path, const std::vector<float>& depth, int width) {
+  check_depth_size(path, width, width > 0 ? (long long)(depth.size() / std::size_t(width)) : 0);
   for (std::size_t i = 0; i < depth.size(); ++i) {
     const float d = depth[i];
     if (std::isfinite(d) && d >= 0) continue;

@@ -48,6 +48,8 @@ std::vector<Rgb8> sample_colour(const Image8& image, int width, int height);
 // Validates a depth map read from `path`: 0 marks an invalid sample; NaN, infinity and negative
 // values mean the file is bad, so they throw InputError naming the file and the first bad pixel.
 void check_depths(const std::filesystem::path& path, const std::vector<float>& depth, int width);
+// A depth map smaller than 2x2 samples holds no triangle: a sign of a broken file, not data.
+void check_depth_size(const std::filesystem::path& path, long long width, long long height);
 
 // Little-endian scalar at data[offset]; the caller has checked the bounds.
 template <typename T>

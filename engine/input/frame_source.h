@@ -20,6 +20,9 @@ struct InputOptions {
   double rgbd_depth_scale = 0.001;       // metres per depth-PNG unit (7-Scenes: millimetres)
   bool rgbd_use_colour = true;           // use *.color.(png|jpg) when its size matches the depth
   int frame_step = 1;                    // fuse every frame_step-th depth map (redundant sequences)
+  // job.skip_bad: a depth map that fails to read is skipped (SkippingSource), so per-frame
+  // problems the readers would find at open time (a view's missing meta.ini or pose) wait for load().
+  bool skip_bad = false;
   bool check() const;                    // throws InputError on a bad value
 };
 

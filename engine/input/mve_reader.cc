@@ -125,7 +125,8 @@ std::unique_ptr<FrameSource> open_mve(const fs::path& scene, const InputOptions&
     MveView v{d, d / (options.mve_depth + ".mvei")};
     // Views without the depth embedding are normal (dmrecon skips views it cannot reconstruct).
     if (!fs::is_regular_file(v.depth_path, ec)) continue;
-    if (!fs::is_regular_file(d / "meta.ini", ec)) throw input_error((d / "meta.ini").string(), "missing file");
+    if (!options.skip_bad && !fs::is_regular_file(d / "meta.ini", ec))
+      throw input_error((d / "meta.ini").string(), "missing file");
     views.push_back(std::move(v));
   }
   if (views.empty())

@@ -107,6 +107,7 @@ RangeScan read_range_grid_ply(const fs::path& path) {
   if (!ascii) throw input_error(path.string(), "PLY header has no format line");
   if (cols <= 0 || rows <= 0 || cols > (1 << 16) || rows > (1 << 16))
     throw input_error(path.string(), "not a range grid: needs positive obj_info num_cols and num_rows");
+  input_detail::check_depth_size(path, cols, rows);
 
   const std::string_view body = std::string_view(text).substr(std::min(pos, text.size()));
   // Each ASCII value takes at least two bytes (digit + separator): bounds every count by the file.

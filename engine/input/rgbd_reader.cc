@@ -89,6 +89,7 @@ void set_pose(const fs::path& path, Sensor* s) {
 DepthFrame RgbdSource::load(std::size_t i) const {
   const RgbdFrame& fr = frames_.at(i);
   const Image16 png = read_png16(fr.depth);
+  input_detail::check_depth_size(fr.depth, png.width, png.height);
   DepthFrame f;
   f.name = fr.depth.string();
   f.width = png.width;
@@ -132,7 +133,7 @@ std::unique_ptr<FrameSource> open_rgbd(const fs::path& folder, const InputOption
     const std::string name = d.filename().string();
     const std::string stem = name.substr(0, name.size() - std::strlen(kDepthSuffix));
     RgbdFrame fr{d, folder / (stem + ".pose.txt"), {}};
-    if (!fs::is_regular_file(fr.pose, ec))
+    if (!options.skip_bad && !fs::is_regular_file(fr.pose, ec))
       throw input_error(fr.pose.string(), "missing file (every depth map needs its camera-to-world pose)");
     if (options.rgbd_use_colour) {
       for (const char* ext : {".color.png", ".color.jpg"})

@@ -80,7 +80,7 @@ class Input {
     std::error_code ec;
     if (!fs::is_regular_file(path, ec)) throw input_error(name_, "missing file");
     size_ = fs::file_size(path, ec);
-    if (ec || !in_) throw input_error(name_, "cannot open file");
+    if (ec || !in_) throw input_error(name_, "cannot open file" + (ec ? ": " + ec.message() : std::string()));
     buf_.resize(kBuffer);
   }
 
