@@ -4,6 +4,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "engine/error.h"
 #include "engine/hash.h"
 
 namespace sf {
@@ -66,6 +67,12 @@ void fill_perspective_samples(DepthFrame& frame, const std::vector<float>& depth
       frame.position[i] = (Rt * (Xc - s.t)).cast<float>();
       frame.image_pos[i] = Eigen::Vector2f(float(u), float(v));
       frame.footprint[i] = float(z / f_mean);
+      // Finite depths and poses can still overflow float positions (a translation of 1e300 m):
+      // the file is bad, not the sample.
+      if (!frame.position[i].allFinite() || !(frame.footprint[i] > 0) || !std::isfinite(frame.footprint[i]))
+        throw InputError(frame.name + ": the sample at (col " + std::to_string(col) + ", row " + std::to_string(row) +
+                         ") lands outside any sensible space (position or footprint not a finite float); the camera "
+                         "pose or the depth is out of range");
     }
   }
 }

@@ -299,6 +299,13 @@ TEST(BadInputTable, ColmapTextModel) {
          t[5] = "nan";
          edit(p, old, joined(t));
        }, "images.txt", "nan"},
+      {"images.txt translation beyond float range", [](const fs::path& in) {
+         const fs::path p = in / "sparse/images.txt";
+         auto t = tokens(colmap_line(p, 2));
+         const std::string old = joined(t);
+         t[6] = "1e300";
+         edit(p, old, joined(t));
+       }, "png.geometric.bin", "out of range"},
       {"images.txt duplicate id", [](const fs::path& in) {
          const fs::path p = in / "sparse/images.txt";
          auto t = tokens(colmap_line(p, 2));
@@ -459,6 +466,9 @@ TEST(BadInputTable, RgbdSequence) {
        }, pose, "not a rotation"},
       {"pose with NaN", [=](const fs::path& in) { write_all(in / pose, "1 0 0 nan\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"); },
        pose, "nan"},
+      {"pose translation beyond float range", [=](const fs::path& in) {
+         write_all(in / pose, "1 0 0 0\n0 1 0 1e300\n0 0 1 0\n0 0 0 1\n");
+       }, depth, "out of range"},
       {"pose last row not 0 0 0 1", [=](const fs::path& in) {
          write_all(in / pose, "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 1 1\n");
        }, pose, "last row"},

@@ -129,6 +129,10 @@ DepthFrame range_scan_frame(const RangeScan& scan, const RangeScanPose& pose, co
       f.position[i] = pose.to_world(p->cast<double>()).cast<float>();
       f.image_pos[i] = Eigen::Vector2f(p->x(), -p->y());
       f.footprint[i] = float(std::sqrt(s_col * s_row));
+      if (!f.position[i].allFinite() || !std::isfinite(f.footprint[i]))
+        throw input_error(name, "the sample at (col " + std::to_string(col) + ", row " + std::to_string(row) +
+                                    ") lands outside any sensible space (not a finite float); the scan's "
+                                    "registration or its points are out of range");
       if (!scan.confidence.empty()) f.confidence[i] = scan.confidence[std::size_t(scan.grid[i])];
     }
   return f;
