@@ -174,9 +174,16 @@ std::size_t default_memory_limit() {
 void write_text_atomically(const std::filesystem::path& path, const std::string& text) {
   const std::filesystem::path tmp = path.string() + ".tmp";
   {
+    errno = 0;
     std::ofstream out(tmp);
     out << text;
-    if (!out) throw input_error(tmp.string(), "cannot write");
+    out.close();
+    if (!out) {
+      const int err = errno;
+      std::error_code ec;
+      std::filesystem::remove(tmp, ec);
+      throw_write_error(tmp.string(), "cannot write", err);
+    }
   }
   std::filesystem::rename(tmp, path);
 }
@@ -410,31 +417,41 @@ void run_fuse(const FuseArgs& a) {
   FusionStats stats;
   MeshCounts mesh;
   bool extracted = false;
-  // A job this run created and that stopped on bad input before integrating anything holds no work:
-  // remove it rather than leave an empty job behind (nothing of a failed run remains).
+  // A job this run created that stopped (bad input, a full disk) before integrating anything holds
+  // no work: remove it rather than leave an empty or half-made job behind.
   const bool job_existed = std::filesystem::exists(job_options.dir);
-  for (int attempt = 0;; ++attempt) {
-    job_holder.emplace(job_options, identity, input_abs, output_abs);
+  auto removed_empty_job = [&]() -> bool {
+    if (job_existed || job_options.follow) return false;
+    std::error_code ec;
+    if (std::filesystem::exists(job_options.dir / "skipped.txt", ec)) return false;
+    bool empty = true;  // a journal this run could not even finish creating holds nothing
     try {
+      empty = Job::status(job_options.dir).integrated == 0;
+    } catch (const std::exception&) {
+    }
+    if (empty) std::filesystem::remove_all(job_options.dir, ec);
+    return empty && !ec;
+  };
+  for (int attempt = 0;; ++attempt) {
+    try {
+      job_holder.emplace(job_options, identity, input_abs, output_abs);
       extracted = run_job(*job_holder, mesh, stats);
       break;
+    } catch (const ResourceError& e) {
+      job_holder.reset();  // releases the lock
+      if (removed_empty_job())
+        throw ResourceError(std::string(e.what()) + "; nothing was integrated yet: once fixed, run the command again");
+      // The last checkpoint is intact (tiles are written before the journal commits them).
+      throw ResourceError(std::string(e.what()) + "; once fixed, continue with: scalefuse resume " +
+                          std::filesystem::absolute(job_options.dir).string());
     } catch (const JobMismatch& e) {
       if (!implicit_job || attempt > 0) throw;
       if (!a.quiet) std::fprintf(stderr, "starting over: %s\n", e.what());
       job_holder.reset();
       std::filesystem::remove_all(job_options.dir);
     } catch (const InputError&) {
-      job_holder.reset();  // releases the lock
-      if (!job_existed && !job_options.follow) {
-        std::error_code ec;
-        bool empty = false;
-        try {
-          empty = Job::status(job_options.dir).integrated == 0;
-        } catch (const std::exception&) {
-        }
-        if (empty && !std::filesystem::exists(job_options.dir / "skipped.txt", ec))
-          std::filesystem::remove_all(job_options.dir, ec);
-      }
+      job_holder.reset();
+      removed_empty_job();
       throw;
     }
   }

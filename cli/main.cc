@@ -1,6 +1,8 @@
 // scalefuse command-line entry: subcommands register themselves (cli/commands.h); errors become
-// one line on stderr and an exit code: 2 for bad input, 1 for internal errors.
+// one line on stderr and an exit code: 2 for bad input, 3 for the machine (disk full), 1 for
+// internal errors.
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include <cstdio>
 #include <exception>
 
@@ -17,6 +19,9 @@ int main(int argc, char** argv) {
   sf::cli::add_eval_command(app);
   sf::cli::add_job_commands(app);
   sf::cli::add_cluster_commands(app);
+  // A file-size limit (ulimit -f) makes the write fail with EFBIG, reported like a full disk,
+  // instead of killing the process mid-write.
+  std::signal(SIGXFSZ, SIG_IGN);
   try {
     sf::initialize_vdb();
     app.parse(argc, argv);
@@ -35,6 +40,9 @@ int main(int argc, char** argv) {
   } catch (const sf::InputError& e) {
     std::fprintf(stderr, "scalefuse: error: %s\n", e.what());
     return 2;
+  } catch (const sf::ResourceError& e) {
+    std::fprintf(stderr, "scalefuse: error: %s\n", e.what());
+    return 3;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "scalefuse: internal error: %s\n", e.what());
     return 1;

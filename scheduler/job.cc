@@ -18,6 +18,15 @@
 namespace sf {
 namespace {
 
+// A journal failure: a full or failing disk is the machine's (ResourceError, exit 3), anything
+// else (a damaged or foreign database) bad input naming the journal.
+[[noreturn]] void throw_journal_error(sqlite3* db, const std::string& where, const std::string& detail = "") {
+  const int code = db ? (sqlite3_errcode(db) & 0xff) : SQLITE_ERROR;
+  const std::string message = where + ": job journal error: " + (detail.empty() && db ? sqlite3_errmsg(db) : detail);
+  if (code == SQLITE_FULL || code == SQLITE_IOERR) throw ResourceError(message);
+  throw InputError(message);
+}
+
 constexpr int kJobVersion = 1;
 
 // Thin RAII over the SQLite C API: every failure becomes an exception naming the journal.
@@ -54,7 +63,7 @@ class Statement {
   }
 
  private:
-  [[noreturn]] void fail() const { throw InputError(where_ + ": job journal error: " + sqlite3_errmsg(db_)); }
+  [[noreturn]] void fail() const { throw_journal_error(db_, where_); }
   sqlite3* db_;
   sqlite3_stmt* stmt_ = nullptr;
   std::string where_;
@@ -65,7 +74,7 @@ void exec(sqlite3* db, const std::string& sql, const std::string& where) {
   if (sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &err) != SQLITE_OK) {
     const std::string msg = err ? err : "unknown";
     sqlite3_free(err);
-    throw InputError(where + ": job journal error: " + msg);
+    throw_journal_error(db, where, msg);
   }
 }
 

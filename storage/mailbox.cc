@@ -17,8 +17,12 @@
 namespace sf {
 
 namespace {
+// A failed scratch file operation: the disk (full, failing) is ResourceError, the rest internal.
 std::runtime_error io_error(const std::filesystem::path& path, const char* what) {
-  return std::runtime_error(path.string() + ": " + what + ": " + std::strerror(errno));
+  const int err = errno;
+  const std::string message = path.string() + ": " + what + ": " + std::strerror(err);
+  if (is_resource_errno(err)) throw ResourceError(message);
+  return std::runtime_error(message);
 }
 }  // namespace
 

@@ -84,7 +84,7 @@ void write_all(int fd, const unsigned char* data, std::size_t size, const std::f
     const ssize_t n = ::write(fd, data, size);
     if (n < 0) {
       if (errno == EINTR) continue;
-      throw InputError(path.string() + ": cannot write tile: " + errno_text());
+      throw_write_error(path.string(), "cannot write tile", errno);
     }
     data += n;
     size -= std::size_t(n);
@@ -146,10 +146,10 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   std::filesystem::path tmp = path;
   tmp += ".tmp." + std::to_string(::getpid());
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw InputError(tmp.string() + ": cannot create tile: " + errno_text());
+  if (fd < 0) throw_write_error(tmp.string(), "cannot create tile", errno);
   try {
     write_all(fd, stored.data(), total, tmp);
-    if (durable && ::fsync(fd) != 0) throw InputError(tmp.string() + ": cannot sync tile: " + errno_text());
+    if (durable && ::fsync(fd) != 0) throw_write_error(tmp.string(), "cannot sync tile", errno);
   } catch (...) {
     ::close(fd);
     std::error_code ec;
@@ -157,15 +157,16 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
     throw;
   }
   if (::close(fd) != 0) {
+    const int err = errno;
     std::error_code ec;
     std::filesystem::remove(tmp, ec);
-    throw InputError(tmp.string() + ": cannot close tile: " + errno_text());
+    throw_write_error(tmp.string(), "cannot close tile", err);
   }
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);
   if (ec) {
     std::filesystem::remove(tmp, ec);
-    throw InputError(path.string() + ": cannot rename tile into place: " + ec.message());
+    throw_write_error(path.string(), "cannot rename tile into place", ec.value());
   }
   const std::filesystem::path dir = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
   const int dfd = durable ? ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC) : -1;

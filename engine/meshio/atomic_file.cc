@@ -20,7 +20,7 @@ AtomicFile::AtomicFile(fs::path path) : path_(std::move(path)) {
   tmp_ = path_;
   tmp_ += ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
   file_ = std::fopen(tmp_.c_str(), "wb");
-  if (!file_) throw input_error(path_.string(), std::string("cannot create file: ") + std::strerror(errno));
+  if (!file_) throw_write_error(path_.string(), "cannot create file", errno);
 }
 
 AtomicFile::~AtomicFile() {
@@ -34,7 +34,7 @@ AtomicFile::~AtomicFile() {
 void AtomicFile::write(const void* data, std::size_t bytes) {
   if (bytes == 0) return;
   if (std::fwrite(data, 1, bytes, file_) != bytes)
-    throw input_error(path_.string(), std::string("cannot write file: ") + std::strerror(errno));
+    throw_write_error(path_.string(), "cannot write file", errno);
 }
 
 void AtomicFile::commit() {
@@ -45,12 +45,12 @@ void AtomicFile::commit() {
   std::error_code ec;
   if (!ok || !closed) {
     fs::remove(tmp_, ec);
-    throw input_error(path_.string(), std::string("cannot write file: ") + std::strerror(err));
+    throw_write_error(path_.string(), "cannot write file", err);
   }
   fs::rename(tmp_, path_, ec);
   if (ec) {
     fs::remove(tmp_, ec);
-    throw input_error(path_.string(), "cannot move the written file into place: " + ec.message());
+    throw_write_error(path_.string(), "cannot move the written file into place", ec.value());
   }
 }
 
