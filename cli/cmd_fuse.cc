@@ -21,6 +21,7 @@
 #include "engine/fusion.h"
 #include "engine/input/follow_source.h"
 #include "engine/input/skipping_source.h"
+#include "engine/meshio/atomic_file.h"
 #include "engine/meshio/ply_io.h"
 #include "engine/vdb_export.h"
 #include "scheduler/job.h"
@@ -172,20 +173,7 @@ std::size_t default_memory_limit() {
 }
 
 void write_text_atomically(const std::filesystem::path& path, const std::string& text) {
-  const std::filesystem::path tmp = path.string() + ".tmp";
-  {
-    errno = 0;
-    std::ofstream out(tmp);
-    out << text;
-    out.close();
-    if (!out) {
-      const int err = errno;
-      std::error_code ec;
-      std::filesystem::remove(tmp, ec);
-      throw_write_error(tmp.string(), "cannot write", err);
-    }
-  }
-  std::filesystem::rename(tmp, path);
+  write_file_atomic(path, text);
 }
 
 namespace {

@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "engine/error.h"
+#include "engine/meshio/atomic_file.h"
 #include "scheduler/job.h"
 
 namespace sf {
@@ -71,26 +72,7 @@ void write_cluster_plan(const std::filesystem::path& dir, const ClusterPlan& pla
                      {"frames", tile.frames}});
   }
   j["tiles"] = tiles;
-  const std::filesystem::path path = dir / "plan.json", tmp = dir / "plan.json.tmp";
-  const std::string text = j.dump(1) + "\n";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw_write_error(tmp.string(), "cannot write", errno);
-  std::size_t written = 0;
-  while (written < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + written, text.size() - written);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) break;
-    written += std::size_t(n);
-  }
-  const bool ok = written == text.size() && ::fsync(fd) == 0;
-  const int err = ok ? 0 : (errno ? errno : ENOSPC);  // a write of 0 bytes: the device is full
-  ::close(fd);
-  if (!ok) {
-    std::error_code ec;
-    std::filesystem::remove(tmp, ec);
-    throw_write_error(tmp.string(), "cannot write the plan", err);
-  }
-  std::filesystem::rename(tmp, path);
+  write_file_atomic(dir / "plan.json", j.dump(1) + "\n");
 }
 
 ClusterPlan read_cluster_plan(const std::filesystem::path& dir) {

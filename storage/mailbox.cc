@@ -18,11 +18,11 @@ namespace sf {
 
 namespace {
 // A failed scratch file operation: the disk (full, failing) is ResourceError, the rest internal.
-std::runtime_error io_error(const std::filesystem::path& path, const char* what) {
+[[noreturn]] void fail_io(const std::filesystem::path& path, const char* what) {
   const int err = errno;
   const std::string message = path.string() + ": " + what + ": " + std::strerror(err);
   if (is_resource_errno(err)) throw ResourceError(message);
-  return std::runtime_error(message);
+  throw std::runtime_error(message);
 }
 }  // namespace
 
@@ -31,16 +31,16 @@ Mailbox::Mailbox(std::filesystem::path dir, std::string name) {
   File& f = parts_.emplace_back();
   f.path = dir / (name + ".box");
   f.fd = ::open(f.path.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (f.fd < 0) throw io_error(f.path, "cannot create scratch file");
+  if (f.fd < 0) fail_io(f.path, "cannot create scratch file");
 }
 
 Mailbox::Mailbox(std::filesystem::path dir, std::string name, std::vector<Blob> committed) {
   File& f = parts_.emplace_back();
   f.path = dir / (name + ".box");
   f.fd = ::open(f.path.c_str(), O_RDWR | O_CLOEXEC);
-  if (f.fd < 0) throw io_error(f.path, "cannot open the scratch file of the job's extraction");
+  if (f.fd < 0) fail_io(f.path, "cannot open the scratch file of the job's extraction");
   struct stat st;
-  if (::fstat(f.fd, &st) != 0) throw io_error(f.path, "cannot read the scratch file's size");
+  if (::fstat(f.fd, &st) != 0) fail_io(f.path, "cannot read the scratch file's size");
   end_ = std::uint64_t(st.st_size);
   std::uint64_t next = 0;
   for (const Blob& b : committed) {
@@ -100,7 +100,7 @@ int Mailbox::fd_of(std::uint32_t part) const {
   File& f = parts_[part];
   if (f.fd >= 0) return f.fd;
   const int fd = ::open(f.path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) throw io_error(f.path, "cannot open another tile's exchange file");
+  if (fd < 0) fail_io(f.path, "cannot open another tile's exchange file");
   struct stat st;
   if (::fstat(fd, &st) != 0 || std::uint64_t(st.st_size) < f.needed) {
     ::close(fd);
@@ -113,7 +113,7 @@ int Mailbox::fd_of(std::uint32_t part) const {
 
 std::vector<Mailbox::Blob> Mailbox::sync_blobs_from(const std::vector<std::uint64_t>& srcs) const {
   if (union_) throw std::logic_error("Mailbox: sync of a read-only union");
-  if (::fdatasync(parts_[0].fd) != 0) throw io_error(parts_[0].path, "cannot sync scratch data (disk full?)");
+  if (::fdatasync(parts_[0].fd) != 0) fail_io(parts_[0].path, "cannot sync scratch data (disk full?)");
   std::lock_guard lock(mutex_);
   std::vector<Blob> out;
   if (sealed_.load()) throw std::logic_error("Mailbox: journal sync after collect");
@@ -124,7 +124,7 @@ std::vector<Mailbox::Blob> Mailbox::sync_blobs_from(const std::vector<std::uint6
 
 void Mailbox::sync() const {
   if (union_) return;
-  if (::fdatasync(parts_[0].fd) != 0) throw io_error(parts_[0].path, "cannot sync scratch data (disk full?)");
+  if (::fdatasync(parts_[0].fd) != 0) fail_io(parts_[0].path, "cannot sync scratch data (disk full?)");
 }
 
 std::vector<Mailbox::Blob> Mailbox::blobs() const {
@@ -155,7 +155,7 @@ void Mailbox::post_bytes(std::uint64_t dest, std::uint64_t src, const void* data
   for (std::size_t done = 0; done < std::size_t(stored);) {
     const ssize_t n = ::pwrite(parts_[0].fd, packed.data() + done, std::size_t(stored) - done, off_t(offset + done));
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw io_error(parts_[0].path, "cannot write scratch data (disk full?)");
+    if (n <= 0) fail_io(parts_[0].path, "cannot write scratch data (disk full?)");
     done += std::size_t(n);
   }
   end_ += std::uint64_t(stored);
@@ -193,7 +193,7 @@ std::vector<unsigned char> Mailbox::collect_bytes(std::uint64_t dest) const {
     for (std::size_t done = 0; done < e->stored;) {
       const ssize_t n = ::pread(fd, packed.data() + done, e->stored - done, off_t(e->offset + done));
       if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) throw io_error(path, "cannot read scratch data");
+      if (n <= 0) fail_io(path, "cannot read scratch data");
       done += std::size_t(n);
     }
     const int got = LZ4_decompress_safe(packed.data(), reinterpret_cast<char*>(out.data() + at), int(e->stored), int(e->raw));
@@ -225,19 +225,19 @@ void write_blob_manifest(const std::filesystem::path& file, const std::vector<Bl
   const std::string data = text.str();
   const std::filesystem::path tmp = file.string() + ".tmp";
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw io_error(tmp, "cannot create");
+  if (fd < 0) fail_io(tmp, "cannot create");
   for (std::size_t done = 0; done < data.size();) {
     const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) {
       ::close(fd);
-      throw io_error(tmp, "cannot write (disk full?)");
+      fail_io(tmp, "cannot write (disk full?)");
     }
     done += std::size_t(n);
   }
   if (::fsync(fd) != 0) {
     ::close(fd);
-    throw io_error(tmp, "cannot sync (disk full?)");
+    fail_io(tmp, "cannot sync (disk full?)");
   }
   ::close(fd);
   std::filesystem::rename(tmp, file);
@@ -273,7 +273,7 @@ std::vector<BlobRecord> read_blob_manifest(const std::filesystem::path& file) {
 
 ScratchFolder::ScratchFolder(const std::string& prefix) {
   std::string pattern = (std::filesystem::temp_directory_path() / (prefix + ".XXXXXX")).string();
-  if (!::mkdtemp(pattern.data())) throw io_error(pattern, "cannot create a scratch folder");
+  if (!::mkdtemp(pattern.data())) fail_io(pattern, "cannot create a scratch folder");
   path_ = pattern;
 }
 
