@@ -334,6 +334,8 @@ void run_fuse(const FuseArgs& a) {
   if (const char* k = std::getenv("SCALEFUSE_TEST_TERM_AFTER")) job_options.term_after = std::strtoull(k, nullptr, 10);
   if (const char* k = std::getenv("SCALEFUSE_TEST_KILL_IN_EXTRACTION"))
     job_options.kill_in_extraction = std::strtoull(k, nullptr, 10);
+  if (const char* k = std::getenv("SCALEFUSE_TEST_TERM_IN_EXTRACTION"))
+    job_options.term_in_extraction = std::strtoull(k, nullptr, 10);
   const std::string identity = params.assignments(kIntegrationParameters);
   const std::string output_abs = std::filesystem::absolute(a.output).string();
   if (implicit_job && std::filesystem::exists(job_options.dir / "job.sqlite")) {
@@ -363,12 +365,16 @@ void run_fuse(const FuseArgs& a) {
       hooks.on_regularized = [&](const std::vector<SurfaceVoxel>& voxels, const RootCube& root) {
         export_vdb(a.export_vdb, voxels, root);
       };
-    // SIGINT/SIGTERM stop the integration after the depth maps in flight, checkpoint, and exit.
-    auto stop_signals = std::make_unique<StopSignals>();
+    // SIGINT/SIGTERM stop the run at the next safe point (after the depth maps or bricks in
+    // flight), with the job checkpointed, and the process exits with 128 + the signal.
+    StopSignals stop_signals;
     hooks.stop = &g_stop;
     hooks.follow = follow;
-    // Past integration a signal ends the process as usual: the job is checkpointed.
-    hooks.integrated = [&] { stop_signals.reset(); };
+    // Following, a signal ends the feed and the job goes on to extract: that request is spent.
+    if (follow) hooks.integrated = [] {
+      g_stop = false;
+      g_signal = 0;
+    };
     hooks.stop_after_integration = a.integrate_only || a.tile.has_value();
     if (a.tile) {
       hooks.frames = &a.tile->frames;

@@ -3,6 +3,8 @@
 //   InputError    -> exit 2: the user's data or options are wrong (names the file and the problem).
 //   ResourceError -> exit 3: the machine: the disk is full, a quota or file-size limit is reached,
 //                    the device fails. Nothing is wrong with the job; it resumes once fixed.
+//   Interrupted   -> exit 128 + the signal: SIGINT/SIGTERM stopped a job at a safe point after a
+//                    checkpoint; it resumes.
 //   anything else -> exit 1: an internal error.
 #include <cerrno>
 #include <cstring>
@@ -17,6 +19,13 @@ class InputError : public std::runtime_error {
 };
 
 class ResourceError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// A stop request (FusionHooks::stop, set by SIGINT/SIGTERM) ended the work at a safe point; the
+// job's journal holds a checkpoint of everything finished.
+class Interrupted : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };

@@ -434,6 +434,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     DepthFrame frame;
     std::vector<FrameTriangle> triangles;
     LateSamples late;
+    std::unique_ptr<Item>* slot = nullptr;  // the pipeline slot that owns this item
   };
   std::size_t item_bytes_max = 0;  // the largest depth map in flight so far (serial stage only)
   auto item_bytes = [](const Item& item) {
@@ -475,26 +476,35 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
         const std::vector<std::size_t>& list = tile_frames[progress.tile];
         const BrickBox* region = one_tile ? hooks.region : &progress.tiles[progress.tile];
         std::size_t next = progress.tile_frames;
+        // The pipeline's tokens are plain pointers into slots this loop owns: oneTBB 2021 does not
+        // destroy objects still in flight when a stage throws (ASan saw whole depth maps leak on a
+        // full disk), so ownership stays here. At most `tokens` items are alive, and item k's slot
+        // is freed by the last stage before token k + tokens can be issued.
+        std::vector<std::unique_ptr<Item>> slots(tokens);
+        std::size_t issued = 0;
         tbb::parallel_pipeline(
             tokens,
-            tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
-                                                          [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
-                                                            if (next >= list.size() || (stop && stop->load())) {
-                                                              fc.stop();
-                                                              return nullptr;
-                                                            }
-                                                            auto item = std::make_shared<Item>();
-                                                            item->index = list[next++];
-                                                            return item;
-                                                          }) &
-                tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
-                    tbb::filter_mode::parallel,
-                    [&](std::shared_ptr<Item> item) {
-                      item->frame = load_frame(item->index, &item->late);
-                      item->triangles = triangulate(item->frame, options.triangulate);
-                      return item;
-                    }) &
-                tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
+            tbb::make_filter<void, Item*>(tbb::filter_mode::serial_in_order,
+                                          [&](tbb::flow_control& fc) -> Item* {
+                                            if (next >= list.size() || (stop && stop->load())) {
+                                              fc.stop();
+                                              return nullptr;
+                                            }
+                                            std::unique_ptr<Item>& slot = slots[issued++ % tokens];
+                                            slot = std::make_unique<Item>();
+                                            slot->index = list[next++];
+                                            slot->slot = &slot;
+                                            return slot.get();
+                                          }) &
+                tbb::make_filter<Item*, Item*>(tbb::filter_mode::parallel,
+                                               [&](Item* item) {
+                                                 item->frame = load_frame(item->index, &item->late);
+                                                 item->triangles = triangulate(item->frame, options.triangulate);
+                                                 return item;
+                                               }) &
+                tbb::make_filter<Item*, void>(tbb::filter_mode::serial_in_order, [&](Item* item) {
+                  // Frees the slot however this stage ends.
+                  const std::unique_ptr<Item> owned = std::move(*item->slot);
                   // Depth maps enter the field strictly in index order (equations 2-3 are
                   // order-sensitive in floating point).
                   map.next_epoch();
@@ -595,13 +605,28 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
                                         : nullptr;
   BrickExtraction bricks(scratch, root, map.brick_level(), options.extract, limit > 0 ? limit : std::size_t{1} << 30,
                          extract_journal);
+  // From here a stop request (a signal) ends the run at the next brick: the extraction's record
+  // keeps what finished (the integration is checkpointed already).
+  const std::atomic<bool>* extract_stop = hooks.stop;
+  const auto stopping = [&] { return extract_stop && extract_stop->load(); };
+  bricks.set_stop(extract_stop);
   if (!bricks.all_added_before()) {
+    std::atomic<bool> stopped_here{false};
     stats.regularize = regularize_bricks(
         map, options.regularize, hooks.progress,
         [&](BrickCoord coord, std::vector<std::pair<VoxelKey, VoxelData>>&& brick) {
           bricks.add(coord.packed(), surface_voxels(brick));
         },
-        [&](BrickCoord coord) { return bricks.added_before(coord.packed()); });
+        [&](BrickCoord coord) {
+          if (bricks.added_before(coord.packed())) return true;
+          if (!stopping()) return false;
+          stopped_here = true;
+          return true;
+        });
+    if (stopped_here) {
+      bricks.commit_added();
+      throw Interrupted("interrupted in regularization");
+    }
     bricks.all_added();
   }
   map.clear();  // release the field before the tetrahedralization
@@ -625,10 +650,13 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
       end_stage("export");
     }
     if (!by_brick) {
+      // One tetrahedralization cannot stop part way: the request is honoured before and after it.
+      if (stopping()) throw Interrupted("interrupted before the extraction");
       ExtractOptions extract = options.extract;
       extract.brick_level = -1;
       const Mesh mesh = extract_surface(voxels, root, extract, hooks.progress, &stats.extract);
       std::vector<SurfaceVoxel>().swap(voxels);
+      if (stopping()) throw Interrupted("interrupted before writing the mesh");
       stream_mesh(mesh, out);
     }
   }

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/error.h"
 #include "engine/extract/extract.h"
 #include "engine/geometry.h"
 #include "engine/input/frame_source.h"
@@ -81,10 +82,13 @@ struct FusionStats {
 // Hooks that let the caller see the field (e.g. to export it) without the engine knowing formats.
 struct FusionHooks {
   ProgressFn progress;
-  // Set (e.g. by a signal handler) to stop after the depth maps in flight: with a journal the
-  // integration then checkpoints and fuse() throws Interrupted.
+  // Set (e.g. by a signal handler) to stop at the next safe point and throw Interrupted: in
+  // integration after the depth maps in flight (with a journal, then a checkpoint); in
+  // regularization and the brick extraction after the bricks in flight (their progress is
+  // committed to the journal's extraction record); in the global extraction between its steps;
+  // while the mesh is written, between bricks (the temporary output is removed).
   const std::atomic<bool>* stop = nullptr;
-  // Called once the integration is complete (and checkpointed): `stop` is not read after this.
+  // Called once the integration is complete (and checkpointed).
   std::function<void()> integrated;
   std::function<void(const std::vector<SurfaceVoxel>&, const RootCube&)> on_regularized;
   // fuse --follow: the source grows; fuse() integrates what it holds, then asks the feed for more
@@ -109,12 +113,6 @@ struct FusionHooks {
   // (which reads every spilled brick back: a cluster tile's run leaves that to the merge).
   bool stop_after_integration = false;
   bool count_fused_voxels = true;
-};
-
-// fuse() was stopped through FusionHooks::stop; the journal holds a checkpoint.
-class Interrupted : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
 };
 
 // Where an integration stands. Depth maps [0, integrated) are in every brick. A sweep over depth

@@ -40,7 +40,7 @@ std::vector<double> parse_number_list(const std::string& text, std::size_t count
 }
 
 void ParameterSet::add(std::string name, Target target, std::string unit, std::string help) {
-  params_.push_back({std::move(name), std::move(unit), std::move(help), target});
+  params_.push_back({std::move(name), std::move(unit), std::move(help), target, {}});
 }
 
 ParameterSet::Parameter* ParameterSet::find(const std::string& name) {

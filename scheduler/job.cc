@@ -268,8 +268,8 @@ Job::Job(JobOptions options, std::string config, std::string input, std::string 
 // their two's-complement int64).
 class Job::Extraction : public ExtractJournal {
  public:
-  Extraction(sqlite3* db, std::string where, double seconds, std::size_t kill_after)
-      : db_(db), where_(std::move(where)), seconds_(seconds), kill_after_(kill_after) {}
+  Extraction(sqlite3* db, std::string where, double seconds, std::size_t kill_after, std::size_t term_after)
+      : db_(db), where_(std::move(where)), seconds_(seconds), kill_after_(kill_after), term_after_(term_after) {}
   std::vector<std::pair<std::string, std::uint64_t>> finished() const override {
     std::vector<std::pair<std::string, std::uint64_t>> out;
     Statement s(db_, "SELECT pass, item FROM extract_done", where_);
@@ -301,7 +301,9 @@ class Job::Extraction : public ExtractJournal {
       blob.bind(7, std::int64_t(r.blob.raw)).run();
     }
     t.commit();
-    if (kill_after_ > 0 && ++commits_ == kill_after_) ::kill(::getpid(), SIGKILL);
+    ++commits_;
+    if (kill_after_ > 0 && commits_ == kill_after_) ::kill(::getpid(), SIGKILL);
+    if (term_after_ > 0 && commits_ == term_after_) ::kill(::getpid(), SIGTERM);
   }
   void forget(const std::vector<std::string>& boxes) override {
     Transaction t(db_, where_);
@@ -315,7 +317,7 @@ class Job::Extraction : public ExtractJournal {
   sqlite3* db_;
   std::string where_;
   double seconds_;
-  std::size_t kill_after_, commits_ = 0;
+  std::size_t kill_after_, term_after_, commits_ = 0;
 };
 
 ExtractJournal* Job::extraction(const std::string& signature, const std::filesystem::path& scratch) {
@@ -335,7 +337,7 @@ ExtractJournal* Job::extraction(const std::string& signature, const std::filesys
   // Commits at most every 30 s (the integration's checkpoint interval when shorter): a brick
   // pass loses at most that much work.
   extraction_ = std::make_unique<Extraction>(db_, where, std::min(options_.checkpoint_seconds, 30.0),
-                                             options_.kill_in_extraction);
+                                             options_.kill_in_extraction, options_.term_in_extraction);
   return extraction_.get();
 }
 

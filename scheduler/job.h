@@ -49,6 +49,8 @@ struct JobOptions {
   std::size_t term_after = 0;
   // Testing aid: SIGKILL right after the n-th commit of the extraction's progress. 0 = never.
   std::size_t kill_in_extraction = 0;
+  // Testing aid: the same, sending itself SIGTERM. 0 = never.
+  std::size_t term_in_extraction = 0;
   // `scalefuse add`: the inputs may extend the job's (its depth maps first, unchanged).
   bool allow_new_inputs = false;
   // fuse --follow: the input grows while the job runs (implies allow_new_inputs); recorded so

@@ -25,7 +25,14 @@ esac
 BUILD=build-$MODE
 mkdir -p "$BUILD"
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS="$FLAGS" \
-  -DCMAKE_EXE_LINKER_FLAGS="$FLAGS" > "$BUILD/cmake.log"
+  -DCMAKE_EXE_LINKER_FLAGS="$FLAGS" -DSCALEFUSE_TEST_TIMEOUT=3600 > "$BUILD/cmake.log"
 cmake --build "$BUILD" -j"${JOBS:-2}"
 cd "$BUILD"
-ctest --output-on-failure -j"${JOBS:-2}" --timeout 3000 "$@"
+status=0
+ctest --output-on-failure -j"${JOBS:-2}" -E '^cluster\.mpi$' "$@" || status=$?
+# Open MPI dlcloses its components in MPI_Finalize, so LeakSanitizer sees their lifetime tables
+# with no module name to suppress; the MPI run is checked for memory errors, not leaks.
+if [ $# -eq 0 ]; then
+  ASAN_OPTIONS="${ASAN_OPTIONS:-}:detect_leaks=0" ctest --output-on-failure -R '^cluster\.mpi$' || status=$?
+fi
+exit $status

@@ -77,7 +77,6 @@ float get_float(const unsigned char* p) {
   return f;
 }
 
-std::string errno_text() { return std::strerror(errno); }
 
 void write_all(int fd, const unsigned char* data, std::size_t size, const std::filesystem::path& path) {
   while (size > 0) {

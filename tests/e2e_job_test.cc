@@ -3,6 +3,7 @@
 // re-extracts a finished job without integrating again.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -47,6 +48,11 @@ std::string numbered(const char* prefix, int n, const char* suffix) {
   s += suffix;
   return s;
 }
+
+// Commits of the extraction's progress in a brick extraction of kScene committing after every
+// brick: one per brick of each pass and one per pass (the last one ends the last pass, before
+// the mesh is written). It changes with the bricks or passes of the extraction.
+constexpr int kExtractionCommits = 1131;
 
 nlohmann::json json_of(const std::string& text) {
   const std::size_t at = text.find('{');
@@ -212,6 +218,42 @@ TEST(Job, SigtermCheckpointsExitsAndResumesToTheSameMesh) {
   EXPECT_TRUE(bytes_of(out) == bytes_of(ref));
 }
 
+// Issue 6: SIGTERM past integration (the process sends it to itself right after the n-th commit
+// of the extraction's progress: in regularization, in the windows' pass, in a later pass, and
+// after the last pass, before the mesh is written). The bricks in flight finish, their progress
+// is committed, and the process exits with 128 + 15, leaving no mesh and no temporary file; the
+// resumed run skips what was finished and writes the same bytes.
+TEST(Job, SigtermDuringExtractionCommitsExitsAndResumes) {
+  const fs::path dir = test::scratch_dir("job-term-extract");
+  const fs::path ref = dir / "ref.ply";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
+  const std::string expected = bytes_of(ref);
+  const std::string commit_each = " --extract bricks --checkpoint-seconds 0.000001 ";
+  for (int term_after : {60, 380, 1000, kExtractionCommits}) {
+    SCOPED_TRACE("SIGTERM after commit " + std::to_string(term_after));
+    const fs::path out_dir = dir / numbered("t", term_after, "");
+    fs::create_directories(out_dir);
+    const fs::path out = out_dir / "mesh.ply", job = dir / numbered("t", term_after, ".job");
+    const CliRun stopped = scalefuse("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() +
+                                         " -q" + commit_each + kScene,
+                                     "SCALEFUSE_TEST_TERM_IN_EXTRACTION=" + std::to_string(term_after));
+    EXPECT_EQ(stopped.code, 128 + 15) << stopped.output;
+    EXPECT_NE(stopped.output.find("interrupted "), std::string::npos) << stopped.output;
+    EXPECT_NE(stopped.output.find("continue with: scalefuse resume"), std::string::npos) << stopped.output;
+    EXPECT_TRUE(fs::is_empty(out_dir)) << "no mesh and no temporary file";
+    if (term_after == kExtractionCommits) {
+      EXPECT_NE(stopped.output.find("while writing the mesh"), std::string::npos) << stopped.output;
+    }
+    const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
+    EXPECT_EQ(st["stage"], "extracting");
+    const CliRun resumed = scalefuse("resume " + job.string() + " -q --stats " + out.string() + ".json");
+    ASSERT_EQ(resumed.code, 0) << resumed.output;
+    EXPECT_TRUE(bytes_of(out) == expected);
+    const auto stats = nlohmann::json::parse(bytes_of(out.string() + ".json"));
+    EXPECT_GT(stats["extract"]["resumed_items"].get<int>(), 40) << "bricks finished before the signal were skipped";
+  }
+}
+
 TEST(Job, RefusesChangedParametersOrInputsAndReextractsAFinishedJob) {
   const fs::path dir = test::scratch_dir("job-refuse");
   const fs::path input = dir / "scans";
@@ -339,14 +381,24 @@ void write_conf(const fs::path& folder, const std::string& camera, const std::ve
   fs::rename(folder / "bun.conf.tmp", folder / "bun.conf");
 }
 
-// A command run in the background: its exit status lands in DIR/rc.
+// A command run in the background: its exit status lands in DIR/rc. A run still going when the
+// test ends (a failed assertion) is killed, so that it cannot hold the job or the test's output.
 struct Background {
-  fs::path rc;
-  Background(const std::string& args, const fs::path& dir, const std::string& env = "") : rc(dir / "rc") {
+  fs::path rc, pid;
+  Background(const std::string& args, const fs::path& dir, const std::string& env = "")
+      : rc(dir / "rc"), pid(dir / "pid") {
     const std::string cmd = "(" + env + " " + test::scalefuse_binary().string() + " " + args + " > " +
-                            (dir / "log").string() + " 2>&1; echo $? > " + (dir / "rc.tmp").string() + "; mv " +
-                            (dir / "rc.tmp").string() + " " + rc.string() + ") &";
+                            (dir / "log").string() + " 2>&1 & echo $! > " + pid.string() + "; wait $!; echo $? > " +
+                            (dir / "rc.tmp").string() + "; mv " + (dir / "rc.tmp").string() + " " + rc.string() +
+                            ") > /dev/null 2>&1 &";
     EXPECT_EQ(std::system(cmd.c_str()), 0);
+  }
+  ~Background() {
+    if (fs::exists(rc)) return;
+    for (int i = 0; i < 50 && !fs::exists(pid); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (!fs::exists(pid)) return;
+    const std::string id = std::to_string(std::stol(bytes_of(pid)));
+    if (std::system(("kill -9 " + id + " 2> /dev/null").c_str()) != 0) return;  // it ended meanwhile
   }
   // The exit status, or -1 after `seconds`.
   int wait(double seconds) const {
@@ -459,6 +511,42 @@ TEST(Job, FollowEndsOnSigtermWithACheckpointAndAMesh) {
   EXPECT_EQ(st["stage"], "done");
   EXPECT_EQ(st["integrated"], 10);
 }
+// Issue 6: two processes on one job. A following job holds the job's lock while it waits for
+// depth maps; a second fuse or resume on the job is refused as bad input naming the job (and must
+// not remove the folder, as a failed first fuse would), and the first run is unharmed.
+TEST(Job, ASecondProcessOnARunningJobIsRefusedAndLeavesItIntact) {
+  const fs::path dir = test::scratch_dir("job-lock");
+  const fs::path ref = dir / "ref.ply", out = dir / "f.ply", job = dir / "f.job";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
+  fs::create_directories(dir / "run");
+  const Background first("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() +
+                             " -q --follow --poll-seconds 0.1 --settle-seconds 0 --checkpoint-every 2 " + kScene,
+                         dir / "run");
+  bool running = false;
+  for (int tries = 0; tries < 1200 && !running; ++tries) {
+    const CliRun st = scalefuse("status " + job.string() + " --json");
+    running = st.code == 0 && json_of(st.output)["depth_maps"].get<int>() >= 1;
+    if (!running) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(running) << bytes_of(dir / "run" / "log");
+  const std::string refused = job.string() + ": another scalefuse process is using this job";
+  for (const std::string& second :
+       {"fuse " + bunny().string() + " -o " + (dir / "second.ply").string() + " --job " + job.string() + " -q " + kScene,
+        "resume " + job.string() + " -q"}) {
+    SCOPED_TRACE(second);
+    const CliRun r = scalefuse(second);
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find(refused), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << "one line: " << r.output;
+    EXPECT_TRUE(fs::exists(job / "job.sqlite")) << "the refused process left the job alone";
+  }
+  EXPECT_FALSE(fs::exists(dir / "second.ply"));
+  test::write_text(job / "STOP", "");
+  const int rc = first.wait(300);
+  ASSERT_EQ(rc, 0) << bytes_of(dir / "run" / "log");
+  EXPECT_TRUE(bytes_of(out) == bytes_of(ref));
+}
+
 TEST(Job, IntegrateOnlyStopsAtTheCheckpointAndResumeExtractsTheSameMesh) {
   const fs::path dir = test::scratch_dir("job-integrate-only");
   const fs::path ref = dir / "ref.ply", out = dir / "i.ply", job = dir / "i.job";

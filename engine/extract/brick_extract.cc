@@ -201,6 +201,8 @@ struct BrickExtraction::Impl {
   }
   void write_manifest(const Pass& p);
   mutable std::atomic<std::size_t> resumed{0};  // items skipped: an earlier run finished them
+  const std::atomic<bool>* stop = nullptr;      // set_stop()
+  bool stopping() const { return stop && stop->load(std::memory_order_relaxed); }
 
   // Set by prepare():
   int G = 0;                      // lattice level: max(finest, B)
@@ -357,12 +359,16 @@ void BrickExtraction::Impl::run_pass(Pass& p, const std::vector<std::uint64_t>& 
     return;
   }
   for (const std::string& name : p.outputs) box(name);  // made before the threads post to them
-  std::atomic<std::size_t> done{0};
+  std::atomic<std::size_t> done{0}, left{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, items.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t k = r.begin(); k != r.end(); ++k) {
       if (share && !share->owns(items[k])) {
         // another tile's
       } else if (!done_before(p.name, items[k])) {
+        if (stopping()) {  // the bricks in flight finish; the rest wait for the resumed run
+          ++left;
+          continue;
+        }
         fn(k);
         finish(p, items[k]);
       } else {
@@ -373,8 +379,11 @@ void BrickExtraction::Impl::run_pass(Pass& p, const std::vector<std::uint64_t>& 
   });
   {
     std::lock_guard lock(p.mutex);
-    commit(p, true);
+    commit(p, left == 0);
   }
+  if (left > 0)
+    throw Interrupted("interrupted in the extraction's " + p.name + " pass (" + std::to_string(left.load()) + " of " +
+                      std::to_string(items.size()) + " bricks left)");
   release_freed_memory();
   if (this_stage) throw StageEnd{};
 }
@@ -438,6 +447,13 @@ BrickExtraction::~BrickExtraction() {
   impl_.reset();  // the mailboxes delete their files (unless a journal refers to them)
   std::error_code ec;
   std::filesystem::remove(scratch, ec);  // only if empty: the folder may be the caller's
+}
+
+void BrickExtraction::set_stop(const std::atomic<bool>* stop) { impl_->stop = stop; }
+
+void BrickExtraction::commit_added() {
+  std::lock_guard lock(impl_->adding.mutex);
+  impl_->commit(impl_->adding, false);
 }
 
 bool BrickExtraction::added_before(std::uint64_t source) const {
@@ -1370,9 +1386,16 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
   std::uint32_t next = 0;
   for (auto& r : remap)
     if (r != kGone) r = next++;
+  // Stopped while writing: the stream is abandoned (its temporary file goes); the passes before
+  // are committed, so the resumed run writes again from here.
+  const auto check_stop = [&] {
+    if (m.stopping()) throw Interrupted("interrupted while writing the mesh");
+  };
+  check_stop();
   out.begin(next, faces_out);
   std::uint64_t at = 0;
   for (const BrickInfo& b : m.bricks) {
+    check_stop();
     for (const PlyVertex& pv : vertices.collect<PlyVertex>(b.code)) {
       if (remap[at++] == kGone) continue;
       out.vertex(Eigen::Vector3f(pv.position[0], pv.position[1], pv.position[2]),
@@ -1380,11 +1403,13 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
     }
   }
   // A face is kept iff its vertices are: components go whole.
-  for (const BrickInfo& b : m.bricks)
+  for (const BrickInfo& b : m.bricks) {
+    check_stop();
     for (const auto& f : final_faces.collect<std::array<std::uint32_t, 3>>(b.code)) {
       if (remap[f[0]] == kGone) continue;
       out.face({remap[f[0]], remap[f[1]], remap[f[2]]});
     }
+  }
   out.end();
   st.triangles = faces_out;
   report(progress, "extract", kStages, kStages);

@@ -30,6 +30,7 @@
 // With a journal (a job's), the extraction resumes brick by brick: a killed run's next run skips
 // the bricks each pass finished and reads what they posted (ExtractJournal).
 #include <cstddef>
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -114,6 +115,12 @@ class BrickExtraction {
   // Adds voxels of any bricks (each voxel once over all calls), all those of `source` (e.g. the
   // brick they were regularized in) at once. Thread-safe. Then all_added().
   void add(std::uint64_t source, const std::vector<SurfaceVoxel>& voxels);
+  // Once *stop is set, each pass finishes the bricks in flight, commits what it finished to the
+  // journal, and throws Interrupted (the write pass stops between bricks); a run of the same
+  // journal resumes from there.
+  void set_stop(const std::atomic<bool>* stop);
+  // Commits the bricks added so far (a stopped regularization), before throwing Interrupted.
+  void commit_added();
   // Whether an earlier run (of the journal) added `source` already / added everything.
   bool added_before(std::uint64_t source) const;
   bool all_added_before() const;
