@@ -13,6 +13,8 @@
 #include <fstream>
 #include <memory>
 #include <optional>
+#include <set>
+#include <string>
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.h"
@@ -25,6 +27,7 @@
 #include "engine/meshio/ply_io.h"
 #include "engine/vdb_export.h"
 #include "scheduler/job.h"
+#include "scheduler/tile_rebuild.h"
 
 namespace sf::cli {
 
@@ -408,6 +411,7 @@ void run_fuse(const FuseArgs& a) {
   };
   // An implicit job whose depth maps changed is started over (once); an explicit one is refused.
   std::optional<Job> job_holder;
+  std::set<std::uint64_t> rebuilt_bricks;
   FusionStats stats;
   MeshCounts mesh;
   bool extracted = false;
@@ -443,6 +447,20 @@ void run_fuse(const FuseArgs& a) {
       if (!a.quiet) std::fprintf(stderr, "starting over: %s\n", e.what());
       job_holder.reset();
       std::filesystem::remove_all(job_options.dir);
+    } catch (const DamagedTile& e) {
+      // A tile of the checkpoint is missing or damaged: rebuilt once per brick from the depth maps
+      // the job integrated, then the run goes on from the checkpoint.
+      if (!job_holder || !rebuilt_bricks.insert(e.coord.packed()).second) {
+        job_holder.reset();
+        throw;
+      }
+      TileRebuild r;
+      tbb::task_arena arena(threads);
+      arena.execute([&] { r = rebuild_tile(*job_holder, e, *source, options, a.tile ? &a.tile->frames : nullptr); });
+      job_holder.reset();
+      // Even with -q: the user should learn that the job's storage was damaged.
+      std::fprintf(stderr, "%s; rebuilt it by re-integrating the job's %zu depth maps into its brick (%.1f s)\n", e.what(),
+                   r.depth_maps, r.seconds);
     } catch (const InputError&) {
       job_holder.reset();
       removed_empty_job();

@@ -433,6 +433,58 @@ void Job::adopt(const std::vector<Field>& fields, std::size_t depth_maps) {
   t.commit();
 }
 
+std::optional<std::size_t> Job::depth_maps_in_brick(BrickCoord c) const {
+  const IntegrationProgress p = read_progress(db_, options_.dir.string());
+  if (!p.sweeping()) return p.integrated;
+  if (p.tiles.size() == 1) return p.integrated + p.tile_frames;  // one tile: every depth map, in order
+  std::size_t t = 0;
+  while (t < p.tiles.size() && !p.tiles[t].contains(c)) ++t;
+  // A finished tile of the sweep took every depth map of it that reaches it; a later one none yet.
+  if (t < p.tile) return p.sweep_end;
+  if (t > p.tile || p.tile_frames == 0) return p.integrated;
+  return std::nullopt;  // the tile under way took the first tile_frames of those reaching it
+}
+
+void Job::replace_tile(const Field& rebuilt, BrickCoord c) {
+  const std::string where = options_.dir.string();
+  std::optional<std::uint64_t> old_generation;
+  {
+    Statement q(db_, "SELECT generation FROM manifest WHERE bx = ?1 AND by = ?2 AND bz = ?3", where);
+    q.bind(1, c.x).bind(2, c.y).bind(3, c.z);
+    if (q.step()) old_generation = std::uint64_t(q.integer(0));
+  }
+  if (!old_generation) throw std::logic_error(where + ": replace_tile of a brick the checkpoint does not hold");
+  std::size_t i = 0;
+  while (i < rebuilt.manifest.size() && rebuilt.manifest[i].coord.packed() != c.packed()) ++i;
+  if (i == rebuilt.manifest.size())
+    throw InputError(store_->path(c, *old_generation).string() +
+                     ": damaged tile, and re-integrating its depth maps gives no data for its brick");
+  // A new generation: the damaged file stays until the journal refers to its replacement.
+  const std::string old_max = meta(db_, "max_generation", where);
+  const std::uint64_t generation = std::stoull(old_max) + 1;
+  const std::filesystem::path to = store_->path(c, generation);
+  std::error_code ec;
+  std::filesystem::remove(to, ec);
+  std::filesystem::create_hard_link(rebuilt.tiles[i], to, ec);
+  if (ec) std::filesystem::copy_file(rebuilt.tiles[i], to, std::filesystem::copy_options::overwrite_existing);
+  store_->sync();
+  Transaction t(db_, where);
+  Statement up(db_, "UPDATE manifest SET generation = ?4, bytes = ?5 WHERE bx = ?1 AND by = ?2 AND bz = ?3", where);
+  up.bind(1, c.x).bind(2, c.y).bind(3, c.z).bind(4, std::int64_t(generation));
+  up.bind(5, std::int64_t(rebuilt.manifest[i].bytes)).run();
+  set_meta(db_, "max_generation", std::to_string(generation), where);
+  // The rebuilt brick holds what the damaged tile held (integration is deterministic), so an
+  // extraction under way keeps the bricks it finished: its record follows the field's new name.
+  const std::string signature = meta(db_, "extract_signature", where);
+  const std::string old_field = " field " + old_max + "/", new_field = " field " + std::to_string(generation) + "/";
+  const std::size_t at = signature.rfind(old_field);
+  if (at != std::string::npos)
+    set_meta(db_, "extract_signature", signature.substr(0, at) + new_field + signature.substr(at + old_field.size()),
+             where);
+  t.commit();
+  store_->remove(c, *old_generation);
+}
+
 IntegrationProgress Job::begin(const std::vector<FrameIdentity>& frames, const RootCube& root, BrickMap& map) {
   const std::string where = options_.dir.string();
   map.attach_store(store_.get(), options_.memory_limit);
@@ -508,7 +560,8 @@ IntegrationProgress Job::begin(const std::vector<FrameIdentity>& frames, const R
   }
   for (const ManifestEntry& e : manifest)
     if (!std::filesystem::exists(store_->path(e.coord, e.generation)))
-      throw InputError(store_->path(e.coord, e.generation).string() + ": tile of the last checkpoint is missing");
+      throw DamagedTile(store_->path(e.coord, e.generation).string() + ": tile of the last checkpoint is missing", e.coord,
+                        e.generation);
   store_->remove_all_except(keep);
   map.restore(manifest, std::stoull(meta(db_, "max_generation", where)));
   progress_ = read_progress(db_, where);

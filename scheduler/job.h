@@ -126,6 +126,13 @@ class Job : public FusionJournal {
   // synced, then one transaction records them as the checkpoint of all `depth_maps` integrated.
   // For a job that has integrated nothing yet (a cluster plan's, before `scalefuse merge`).
   void adopt(const std::vector<Field>& fields, std::size_t depth_maps);
+  // How many of the job's depth maps (the first ones, in its order) the last checkpoint's brick `c`
+  // holds; nullopt for a brick of the tile under way in a sweep (the journal does not say which).
+  std::optional<std::size_t> depth_maps_in_brick(BrickCoord c) const;
+  // Replaces the checkpoint's tile of brick `c` (found damaged) by the tile of `c` in `rebuilt`,
+  // the field of a job that re-integrated the depth maps this job integrated into that brick
+  // alone: linked under a new generation and committed in one transaction.
+  void replace_tile(const Field& rebuilt, BrickCoord c);
 
  private:
   void checkpoint(BrickMap& map, const char* stage);

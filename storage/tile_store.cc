@@ -39,8 +39,14 @@ void TileStore::sync() const {
 
 void TileStore::read(BrickCoord c, std::uint64_t generation, VoxelTable& voxels) const {
   const std::filesystem::path p = path(c, generation);
-  const BrickCoord got = read_tile(p, voxels);
-  if (got.x != c.x || got.y != c.y || got.z != c.z) throw input_error(p.string(), "damaged tile: holds another brick");
+  BrickCoord got;
+  try {
+    got = read_tile(p, voxels);
+  } catch (const InputError& e) {
+    throw DamagedTile(e.what(), c, generation);
+  }
+  if (got.x != c.x || got.y != c.y || got.z != c.z)
+    throw DamagedTile(p.string() + ": damaged tile: holds another brick", c, generation);
 }
 
 void TileStore::remove(BrickCoord c, std::uint64_t generation) const {

@@ -7,9 +7,21 @@
 #include <set>
 #include <utility>
 
+#include "engine/error.h"
 #include "storage/brick_map.h"
 
 namespace sf {
+
+// A tile a checkpoint refers to is missing or fails its checks (storage/tile_file.h). Bad input
+// like any damaged file, but it names the brick, so that a job can rebuild the tile from the
+// depth maps it integrated (cli: run_fuse).
+class DamagedTile : public InputError {
+ public:
+  DamagedTile(const std::string& message, BrickCoord coord, std::uint64_t generation)
+      : InputError(message), coord(coord), generation(generation) {}
+  BrickCoord coord;
+  std::uint64_t generation;
+};
 
 class TileStore {
  public:
@@ -22,6 +34,7 @@ class TileStore {
   // Makes every tile written so far durable (one syncfs of the folder's file system), before a
   // checkpoint that refers to them is committed.
   void sync() const;
+  // Throws DamagedTile if the tile is missing or damaged.
   void read(BrickCoord c, std::uint64_t generation, VoxelTable& voxels) const;
   void remove(BrickCoord c, std::uint64_t generation) const;
   // Deletes every tile (and leftover temporary file) not in `keep` = {(packed coord, generation)}:

@@ -640,26 +640,56 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
     };
   };
   const std::string resume = "resume {dir}/job -q";
-  check("tile", "payload byte flipped", integrated_copy([&](const fs::path& j) {
+  // A damaged or missing tile is not the end of a job: it is rebuilt from the depth maps (the scene
+  // is still there) and the mesh is the one the undamaged job gives. The mesh goes to the job's
+  // recorded output, root/i.ply, removed after each case.
+  std::string undamaged_mesh;
+  {
+    const fs::path dir = root / "undamaged";
+    fs::create_directories(dir);
+    integrated_copy([](const fs::path&) {})(dir);
+    ASSERT_EQ(scalefuse(substitute(resume, "{dir}", dir.string())).code, 0);
+    undamaged_mesh = read_all(root / "i.ply");
+    fs::remove(root / "i.ply");
+  }
+  auto check_rebuilt = [&](const std::string& name, const std::function<void(const fs::path&)>& prepare,
+                           const std::string& what) {
+    SCOPED_TRACE("tile: " + name);
+    const fs::path dir = root / ("case" + std::to_string(n++));
+    fs::create_directories(dir);
+    prepare(dir);
+    const CliRun r = scalefuse(substitute(resume, "{dir}", dir.string()));
+    EXPECT_EQ(r.code, 0) << r.log;
+    // One line about the tile, then (-q) the line saying where the mesh went.
+    EXPECT_EQ(std::count(r.log.begin(), r.log.end(), '\n'), 2) << r.log;
+    EXPECT_NE(r.log.find("\nmesh written to "), std::string::npos) << r.log;
+    EXPECT_NE(r.log.find(tile_name + ": " + what), std::string::npos) << r.log;
+    EXPECT_NE(r.log.find("; rebuilt it by re-integrating the job's 5 depth maps into its brick"), std::string::npos)
+        << r.log;
+    EXPECT_TRUE(read_all(root / "i.ply") == undamaged_mesh) << "the rebuilt job gives the undamaged job's mesh";
+    fs::remove(root / "i.ply");
+    note_in_table("tile", name, r.log, dir);
+  };
+  check_rebuilt("payload byte flipped", integrated_copy([&](const fs::path& j) {
     std::string s = read_all(j / "tiles" / tile_name);
     s[s.size() - 3] = char(s[s.size() - 3] ^ 0x40);
     write_all(j / "tiles" / tile_name, s);
-  }), resume, tile_name, "checksum");
-  check("tile", "header byte flipped", integrated_copy([&](const fs::path& j) {
+  }), "damaged tile: payload checksum mismatch");
+  check_rebuilt("header byte flipped", integrated_copy([&](const fs::path& j) {
     std::string s = read_all(j / "tiles" / tile_name);
     s[20] = char(s[20] ^ 0x01);
     write_all(j / "tiles" / tile_name, s);
-  }), resume, tile_name, "checksum");
-  check("tile", "truncated", integrated_copy([&](const fs::path& j) {
+  }), "damaged tile: header checksum mismatch");
+  check_rebuilt("truncated", integrated_copy([&](const fs::path& j) {
     truncate_to(j / "tiles" / tile_name, fs::file_size(j / "tiles" / tile_name) - 10);
-  }), resume, tile_name, "");
-  check("tile", "wrong magic", integrated_copy([&](const fs::path& j) {
+  }), "damaged tile: payload of");
+  check_rebuilt("wrong magic", integrated_copy([&](const fs::path& j) {
     std::string s = read_all(j / "tiles" / tile_name);
     s[0] = 'X';
     write_all(j / "tiles" / tile_name, s);
-  }), resume, tile_name, "");
-  check("tile", "missing", integrated_copy([&](const fs::path& j) { fs::remove(j / "tiles" / tile_name); }), resume,
-        tile_name, "");
+  }), "damaged tile: wrong magic");
+  check_rebuilt("missing", integrated_copy([&](const fs::path& j) { fs::remove(j / "tiles" / tile_name); }),
+                "tile of the last checkpoint is missing");
   check("journal", "job.sqlite not a database", integrated_copy([](const fs::path& j) {
     fs::remove(j / "job.sqlite-wal");
     fs::remove(j / "job.sqlite-shm");
