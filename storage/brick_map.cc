@@ -119,8 +119,8 @@ void BrickMap::make_resident(Brick& b) {
   resident_bytes_ += std::int64_t(resident_size(b));
   b.resident = true;
   b.dirty = false;
-  ++spill_.reloaded;
-  spill_.bytes_read += b.tile_bytes;
+  ++reloaded_;
+  bytes_read_ += b.tile_bytes;
 }
 
 void BrickMap::write_tile_as(Brick& b, std::uint64_t g) {
@@ -133,7 +133,7 @@ void BrickMap::write_tile_as(Brick& b, std::uint64_t g) {
 
 void BrickMap::write_tile_of(Brick& b) {
   write_tile_as(b, next_generation_++);
-  spill_.bytes_written += b.tile_bytes;
+  bytes_written_ += b.tile_bytes;
 }
 
 void BrickMap::release(Brick& b) {
@@ -216,7 +216,7 @@ void BrickMap::enforce_limit() {
 void BrickMap::spill(Brick& b) {
   if (b.dirty || b.generation == 0) write_tile_of(b);
   release(b);
-  ++spill_.spilled;
+  ++spilled_;
 }
 
 void BrickMap::spill_all() {
@@ -237,8 +237,8 @@ void BrickMap::spill_all() {
     release(*resident[i]);
   });
   for (std::size_t i = 0; i < resident.size(); ++i) {
-    if (generation[i] != 0) spill_.bytes_written += resident[i]->tile_bytes;
-    ++spill_.spilled;
+    if (generation[i] != 0) bytes_written_ += resident[i]->tile_bytes;
+    ++spilled_;
   }
 }
 

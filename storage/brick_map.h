@@ -158,7 +158,9 @@ class BrickMap {
   // into a scratch table (memory: one brick). Not safe concurrently with any other access.
   std::array<std::size_t, kMaxLevel + 1> live_voxels_per_level() const;
   std::uint64_t max_generation() const { return next_generation_ - 1; }
-  const SpillStats& spill_stats() const { return spill_; }
+  SpillStats spill_stats() const {
+    return {spilled_.load(), reloaded_.load(), bytes_written_.load(), bytes_read_.load()};
+  }
 
  private:
   Brick& brick(BrickCoord c);
@@ -176,7 +178,9 @@ class BrickMap {
   const TileStore* store_ = nullptr;
   std::size_t memory_limit_ = 0, reserve_ = 0;
   std::uint64_t epoch_ = 1, next_generation_ = 1;
-  SpillStats spill_;
+  // Atomic: bricks are reloaded by integration workers, each holding only its brick's mutex.
+  std::atomic<std::size_t> spilled_{0}, reloaded_{0};
+  std::atomic<std::uint64_t> bytes_written_{0}, bytes_read_{0};
   // Σ over resident bricks of their blocks, index and Brick, kept up to date as blocks are made,
   // bricks load and spill, so that enforce_limit() costs nothing while under the limit.
   std::atomic<std::int64_t> resident_bytes_{0};
