@@ -18,6 +18,15 @@
 namespace sf {
 namespace {
 
+// Puts another job's tile into this job's store: a hard link where the file system allows, else
+// a copy (tiles are never modified in place, so sharing the inode is safe).
+void link_tile(const std::filesystem::path& from, const std::filesystem::path& to) {
+  std::error_code ec;
+  std::filesystem::remove(to, ec);
+  std::filesystem::create_hard_link(from, to, ec);
+  if (ec) std::filesystem::copy_file(from, to, std::filesystem::copy_options::overwrite_existing);
+}
+
 // A journal failure: a full or failing disk is the machine's (ResourceError, exit 3), anything
 // else (a damaged or foreign database) bad input naming the journal.
 [[noreturn]] void throw_journal_error(sqlite3* db, const std::string& where, const std::string& detail = "") {
@@ -408,11 +417,7 @@ void Job::adopt(const std::vector<Field>& fields, std::size_t depth_maps) {
         throw InputError(f.tiles[i].string() + ": brick (" + std::to_string(e.coord.x) + ", " + std::to_string(e.coord.y) +
                          ", " + std::to_string(e.coord.z) + ") is in the fields of two tiles");
       if (!std::filesystem::exists(f.tiles[i])) throw InputError(f.tiles[i].string() + ": tile of a checkpoint is missing");
-      const std::filesystem::path to = store_->path(e.coord, e.generation);
-      std::error_code ec;
-      std::filesystem::remove(to, ec);
-      std::filesystem::create_hard_link(f.tiles[i], to, ec);
-      if (ec) std::filesystem::copy_file(f.tiles[i], to, std::filesystem::copy_options::overwrite_existing);
+      link_tile(f.tiles[i], store_->path(e.coord, e.generation));
     }
   }
   store_->sync();
@@ -462,11 +467,7 @@ void Job::replace_tile(const Field& rebuilt, BrickCoord c) {
   // A new generation: the damaged file stays until the journal refers to its replacement.
   const std::string old_max = meta(db_, "max_generation", where);
   const std::uint64_t generation = std::stoull(old_max) + 1;
-  const std::filesystem::path to = store_->path(c, generation);
-  std::error_code ec;
-  std::filesystem::remove(to, ec);
-  std::filesystem::create_hard_link(rebuilt.tiles[i], to, ec);
-  if (ec) std::filesystem::copy_file(rebuilt.tiles[i], to, std::filesystem::copy_options::overwrite_existing);
+  link_tile(rebuilt.tiles[i], store_->path(c, generation));
   store_->sync();
   Transaction t(db_, where);
   Statement up(db_, "UPDATE manifest SET generation = ?4, bytes = ?5 WHERE bx = ?1 AND by = ?2 AND bz = ?3", where);
