@@ -448,19 +448,33 @@ void run_fuse(const FuseArgs& a) {
       job_holder.reset();
       std::filesystem::remove_all(job_options.dir);
     } catch (const DamagedTile& e) {
-      // A tile of the checkpoint is missing or damaged: rebuilt once per brick from the depth maps
-      // the job integrated, then the run goes on from the checkpoint.
+      // A tile of the checkpoint is missing or damaged: every damaged tile of the checkpoint is
+      // rebuilt from the depth maps the job integrated (once per brick), then the run goes on from
+      // the checkpoint.
       if (!job_holder || !rebuilt_bricks.insert(e.coord.packed()).second) {
         job_holder.reset();
         throw;
       }
-      TileRebuild r;
       tbb::task_arena arena(threads);
-      arena.execute([&] { r = rebuild_tile(*job_holder, e, *source, options, a.tile ? &a.tile->frames : nullptr); });
+      std::vector<DamagedTile> damage;
+      arena.execute([&] { damage = job_holder->damaged_tiles(); });
+      if (std::none_of(damage.begin(), damage.end(), [&](const DamagedTile& d) { return d.coord.packed() == e.coord.packed(); }))
+        damage.insert(damage.begin(), e);  // found by the run but not by the check (a file that changed since)
+      for (const DamagedTile& d : damage)
+        if (d.coord.packed() != e.coord.packed() && !rebuilt_bricks.insert(d.coord.packed()).second) {
+          job_holder.reset();
+          throw d;
+        }
+      TileRebuild r;
+      arena.execute([&] { r = rebuild_tiles(*job_holder, damage, *source, options, a.tile ? &a.tile->frames : nullptr); });
       job_holder.reset();
       // Even with -q: the user should learn that the job's storage was damaged.
-      std::fprintf(stderr, "%s; rebuilt it by re-integrating the job's %zu depth maps into its brick (%.1f s)\n", e.what(),
-                   r.depth_maps, r.seconds);
+      const std::string together = damage.size() == 1 ? ""
+                                   : " for the " + std::to_string(damage.size()) + " tiles, in " +
+                                         std::to_string(r.passes) + (r.passes == 1 ? " pass" : " passes");
+      for (std::size_t i = 0; i < damage.size(); ++i)
+        std::fprintf(stderr, "%s; rebuilt it by re-integrating the job's %zu depth maps into its brick (%.1f s%s)\n",
+                     damage[i].what(), r.depth_maps[i], r.seconds, together.c_str());
     } catch (const InputError&) {
       job_holder.reset();
       removed_empty_job();

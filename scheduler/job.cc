@@ -12,6 +12,8 @@
 #include <set>
 #include <sstream>
 
+#include <tbb/parallel_for.h>
+
 #include "engine/error.h"
 #include "engine/parameters.h"
 
@@ -448,6 +450,40 @@ std::optional<std::size_t> Job::depth_maps_in_brick(BrickCoord c) const {
   if (t < p.tile) return p.sweep_end;
   if (t > p.tile || p.tile_frames == 0) return p.integrated;
   return std::nullopt;  // the tile under way took the first tile_frames of those reaching it
+}
+
+std::vector<DamagedTile> Job::damaged_tiles() const {
+  std::vector<ManifestEntry> manifest;
+  {
+    Statement s(db_, "SELECT bx, by, bz, generation FROM manifest ORDER BY bz, by, bx", options_.dir.string());
+    while (s.step()) {
+      ManifestEntry e;
+      e.coord = {std::uint32_t(s.integer(0)), std::uint32_t(s.integer(1)), std::uint32_t(s.integer(2))};
+      e.generation = std::uint64_t(s.integer(3));
+      manifest.push_back(e);
+    }
+  }
+  const std::optional<int> brick_level = fixed_brick_level();
+  if (!brick_level) return {};
+  std::vector<std::optional<DamagedTile>> found(manifest.size());
+  tbb::parallel_for(std::size_t(0), manifest.size(), [&](std::size_t i) {
+    const ManifestEntry& e = manifest[i];
+    const std::filesystem::path path = store_->path(e.coord, e.generation);
+    if (!std::filesystem::exists(path)) {
+      found[i] = DamagedTile(path.string() + ": tile of the last checkpoint is missing", e.coord, e.generation);
+      return;
+    }
+    try {
+      VoxelTable voxels(*brick_level);
+      store_->read(e.coord, e.generation, voxels);
+    } catch (const DamagedTile& d) {
+      found[i] = d;
+    }
+  });
+  std::vector<DamagedTile> out;
+  for (auto& d : found)
+    if (d) out.push_back(std::move(*d));
+  return out;
 }
 
 void Job::replace_tile(const Field& rebuilt, BrickCoord c) {

@@ -105,6 +105,7 @@ class Job : public FusionJournal {
 
   const std::filesystem::path& dir() const { return options_.dir; }
   std::size_t checkpoints_committed() const { return checkpoints_; }
+  std::size_t memory_limit() const { return options_.memory_limit; }
 
   // Reads a job's status without changing it. Throws InputError if DIR holds no job.
   static JobStatus status(const std::filesystem::path& dir);
@@ -133,6 +134,11 @@ class Job : public FusionJournal {
   // the field of a job that re-integrated the depth maps this job integrated into that brick
   // alone: linked under a new generation and committed in one transaction.
   void replace_tile(const Field& rebuilt, BrickCoord c);
+  // Every tile of the last checkpoint that is missing or fails its checks, in brick order: each is
+  // read and checked in full, in parallel in the caller's arena. A damaged tile seldom comes alone
+  // (a bad sector, an interrupted copy), and finding them all at once lets them be rebuilt in one
+  // pass over the depth maps (scheduler/tile_rebuild.h).
+  std::vector<DamagedTile> damaged_tiles() const;
 
  private:
   void checkpoint(BrickMap& map, const char* stage);

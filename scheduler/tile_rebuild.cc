@@ -1,7 +1,9 @@
 #include "scheduler/tile_rebuild.h"
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <map>
 #include <numeric>
 #include <optional>
 #include <string>
@@ -10,46 +12,60 @@
 
 namespace sf {
 
-TileRebuild rebuild_tile(Job& job, const DamagedTile& damage, const FrameSource& source, const FusionOptions& options,
-                         const std::vector<std::size_t>* frames) {
+TileRebuild rebuild_tiles(Job& job, const std::vector<DamagedTile>& damage, const FrameSource& source,
+                          const FusionOptions& options, const std::vector<std::size_t>* frames) {
   const auto start = std::chrono::steady_clock::now();
-  const std::optional<std::size_t> held = job.depth_maps_in_brick(damage.coord);
-  if (!held)
-    throw InputError(std::string(damage.what()) +
-                     "; it cannot be rebuilt: its brick is in the tile of the sweep under way, and the journal does "
-                     "not record which depth maps that tile took; remove the job folder and run again");
-  const std::size_t n = *held;
-  std::vector<std::size_t> list(n);
-  if (frames) {
-    if (n > frames->size()) throw InputError(job.dir().string() + ": job journal: more depth maps integrated than listed");
-    list.assign(frames->begin(), frames->begin() + std::ptrdiff_t(n));
-  } else {
-    if (n > source.size()) throw InputError(job.dir().string() + ": job journal: more depth maps integrated than the input has");
-    std::iota(list.begin(), list.end(), std::size_t{0});
+  TileRebuild r;
+  // Bricks by the number of the job's first depth maps they hold; all checked before any rebuild.
+  std::map<std::size_t, std::vector<BrickCoord>> passes;
+  for (const DamagedTile& d : damage) {
+    const std::optional<std::size_t> held = job.depth_maps_in_brick(d.coord);
+    if (!held)
+      throw InputError(std::string(d.what()) +
+                       "; it cannot be rebuilt: its brick is in the tile of the sweep under way, and the journal does "
+                       "not record which depth maps that tile took; remove the job folder and run again");
+    const std::size_t limit = frames ? frames->size() : source.size();
+    if (*held > limit)
+      throw InputError(job.dir().string() + ": job journal: more depth maps integrated than " +
+                       (frames ? "listed" : "the input has"));
+    passes[*held].push_back(d.coord);
+    r.depth_maps.push_back(*held);
   }
   const std::filesystem::path dir = job.dir() / "rebuild";
-  std::filesystem::remove_all(dir);
-  {
-    JobOptions o;
-    o.dir = dir;
-    o.root = job.fixed_root();
-    o.brick_level = job.fixed_brick_level();
-    o.checkpoint_every = std::size_t(-1);
-    o.checkpoint_seconds = 1e30;
-    Job rebuild(o, "", "", "");
-    const BrickBox region{damage.coord, {damage.coord.x + 1, damage.coord.y + 1, damage.coord.z + 1}};
-    FusionHooks hooks;
-    hooks.frames = &list;
-    hooks.region = &region;
-    hooks.stop_after_integration = true;
-    hooks.count_fused_voxels = false;
-    FusionStats stats;
-    fuse(source, options, hooks, &stats, &rebuild);
-    job.replace_tile(Job::field(dir), damage.coord);
+  for (const auto& [n, bricks] : passes) {
+    std::vector<std::size_t> list(n);
+    if (frames)
+      list.assign(frames->begin(), frames->begin() + std::ptrdiff_t(n));
+    else
+      std::iota(list.begin(), list.end(), std::size_t{0});
+    BrickBox region{bricks.front(), {bricks.front().x + 1, bricks.front().y + 1, bricks.front().z + 1}};
+    for (const BrickCoord& c : bricks) {
+      region.lo = {std::min(region.lo.x, c.x), std::min(region.lo.y, c.y), std::min(region.lo.z, c.z)};
+      region.hi = {std::max(region.hi.x, c.x + 1), std::max(region.hi.y, c.y + 1), std::max(region.hi.z, c.z + 1)};
+    }
+    std::filesystem::remove_all(dir);
+    {
+      JobOptions o;
+      o.dir = dir;
+      o.root = job.fixed_root();
+      o.brick_level = job.fixed_brick_level();
+      o.memory_limit = job.memory_limit();
+      o.checkpoint_every = std::size_t(-1);
+      o.checkpoint_seconds = 1e30;
+      Job rebuild(o, "", "", "");
+      FusionHooks hooks;
+      hooks.frames = &list;
+      hooks.region = &region;
+      hooks.stop_after_integration = true;
+      hooks.count_fused_voxels = false;
+      FusionStats stats;
+      fuse(source, options, hooks, &stats, &rebuild);
+      const Job::Field field = Job::field(dir);
+      for (const BrickCoord& c : bricks) job.replace_tile(field, c);
+    }
+    std::filesystem::remove_all(dir);
+    ++r.passes;
   }
-  std::filesystem::remove_all(dir);
-  TileRebuild r;
-  r.depth_maps = n;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return r;
 }

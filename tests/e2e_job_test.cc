@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iterator>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
 #include <thread>
 #include <chrono>
@@ -591,7 +592,8 @@ void flip_byte(const fs::path& file, std::streamoff at) {
 
 // Issue 6: a tile of the checkpoint found damaged (checksum) or missing is rebuilt by
 // re-integrating the job's depth maps into its brick alone, and the job goes on to the same
-// mesh: after integration; in the middle of a brick extraction (whose finished bricks are kept);
+// mesh: after integration (one tile, and four at once: rebuilt together in one pass); in the
+// middle of a brick extraction (whose finished bricks are kept);
 // and stopped in the middle of a sweep of tiles (a memory limit far below the field) with every
 // tile damaged, where a brick of the tile under way cannot be rebuilt and the job says so.
 TEST(Job, DamagedOrMissingTileIsRebuiltFromTheDepthMapsAndGivesTheSameMesh) {
@@ -599,7 +601,7 @@ TEST(Job, DamagedOrMissingTileIsRebuiltFromTheDepthMapsAndGivesTheSameMesh) {
   const fs::path ref = dir / "ref.ply";
   ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
   const std::string expected = bytes_of(ref);
-  for (const std::string damage : {"payload", "missing", "extracting", "sweep"}) {
+  for (const std::string damage : {"payload", "missing", "several", "extracting", "sweep"}) {
     SCOPED_TRACE(damage);
     const fs::path out = dir / (damage + ".ply"), job = dir / (damage + ".job");
     const std::string fuse = "fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() + " -q ";
@@ -618,15 +620,18 @@ TEST(Job, DamagedOrMissingTileIsRebuiltFromTheDepthMapsAndGivesTheSameMesh) {
       tiles = largest_tiles(job, 1000);
     } else {
       first = scalefuse(fuse + "--integrate-only " + kScene);
-      tiles = largest_tiles(job, 1);
+      tiles = largest_tiles(job, damage == "several" ? 4 : 1);
     }
     ASSERT_EQ(first.code, damage == "extracting" || damage == "sweep" ? 128 + 15 : 0) << first.output;
     ASSERT_FALSE(tiles.empty());
+    std::set<fs::path> removed;  // the others get a byte flipped
     for (const fs::path& tile : tiles) {
-      if (damage == "missing")
+      if (damage == "missing" || (damage == "several" && tile == tiles.front())) {
         fs::remove(tile);
-      else
+        removed.insert(tile);
+      } else {
         flip_byte(tile, 64 + 100);  // in the payload, past the 64-byte header
+      }
     }
     const CliRun resumed = scalefuse("resume " + job.string() + " -q --stats " + out.string() + ".json");
     if (damage == "sweep" && resumed.code == 2) {
@@ -640,17 +645,23 @@ TEST(Job, DamagedOrMissingTileIsRebuiltFromTheDepthMapsAndGivesTheSameMesh) {
       continue;
     }
     ASSERT_EQ(resumed.code, 0) << resumed.output;
-    const std::string said = damage == "missing" ? ": tile of the last checkpoint is missing; rebuilt it"
-                                                 : ": damaged tile: payload checksum mismatch; rebuilt it";
     std::size_t rebuilt = 0;
     for (const fs::path& tile : tiles)
-      if (resumed.output.find(tile.string() + said) != std::string::npos) {
+      if (resumed.output.find(tile.string() + (removed.count(tile) ? ": tile of the last checkpoint is missing; rebuilt it"
+                                                                   : ": damaged tile: payload checksum mismatch; rebuilt it")) !=
+          std::string::npos) {
         ++rebuilt;
         EXPECT_FALSE(fs::exists(tile)) << "the damaged tile was replaced by a new generation";
       }
     EXPECT_GE(rebuilt, 1u) << resumed.output;
     if (damage == "sweep") {
       EXPECT_GE(rebuilt, 5u) << resumed.output;
+    }
+    if (damage == "several") {
+      // Found at once (the missing one at restore, the others by checking every tile) and rebuilt
+      // in one pass over the depth maps: they all hold the same ones.
+      EXPECT_EQ(rebuilt, 4u) << resumed.output;
+      EXPECT_NE(resumed.output.find("for the 4 tiles, in 1 pass)"), std::string::npos) << resumed.output;
     }
     EXPECT_TRUE(bytes_of(out) == expected);
     EXPECT_FALSE(fs::exists(job / "rebuild"));
