@@ -43,12 +43,12 @@ for run in $(seq "$RUNS"); do
     start=$(date +%s.%N)
     "$BIN" fuse "$INPUT" -o "$WORK/mesh.ply" --job "$WORK/copy" --integrate-only -q "$@" 2>"$WORK/stderr" >/dev/null
     wall=$(echo "$(date +%s.%N) - $start" | bc)
-    # "...; rebuilt it by re-integrating the job's N depth maps into its brick (S s)", once per tile
+    # "...; rebuilt it by re-integrating the K of the job's N depth maps that reach it (S s)", once per tile
     rebuilt=$(grep -c 'rebuilt it' "$WORK/stderr" || true)
     expected=$(echo ${victims[$case]} | wc -w)
     [ "$rebuilt" = "$expected" ] || { echo "$case: $rebuilt rebuilds reported, $expected expected:" >&2; cat "$WORK/stderr" >&2; exit 1; }
     # every line of one resume reports the time of all its rebuilds together
-    seconds=$(grep -o 'into its brick ([0-9.]* s' "$WORK/stderr" | head -1 | grep -o '[0-9.]*' || true)
+    seconds=$(grep -o 'that reach it ([0-9.]* s' "$WORK/stderr" | head -1 | grep -o '[0-9.]*' || true)
     kib=0; for t in ${victims[$case]}; do kib=$((kib + $(stat -c %s "$t") / 1024)); done
     printf '%s\t%s\t%s\t%s\t%s\n' "$case" "$wall" "${seconds:-0}" "$expected" "$kib" >> "$WORK/lines"
   done

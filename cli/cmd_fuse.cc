@@ -473,8 +473,8 @@ void run_fuse(const FuseArgs& a) {
                                    : " for the " + std::to_string(damage.size()) + " tiles, in " +
                                          std::to_string(r.passes) + (r.passes == 1 ? " pass" : " passes");
       for (std::size_t i = 0; i < damage.size(); ++i)
-        std::fprintf(stderr, "%s; rebuilt it by re-integrating the job's %zu depth maps into its brick (%.1f s%s)\n",
-                     damage[i].what(), r.depth_maps[i], r.seconds, together.c_str());
+        std::fprintf(stderr, "%s; rebuilt it by re-integrating the %zu of the job's %zu depth maps that reach it (%.1f s%s)\n",
+                     damage[i].what(), r.reaching[i], r.depth_maps[i], r.seconds, together.c_str());
     } catch (const InputError&) {
       job_holder.reset();
       removed_empty_job();

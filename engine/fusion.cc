@@ -286,7 +286,8 @@ template <typename LoadFrame>
 std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t to, LoadFrame&& load_frame,
                                                  const FusionOptions& options, const RootCube& root, const BrickMap& map,
                                                  const ProgressFn& progress_fn, IntegrationProgress& progress,
-                                                 FusionStats& stats, const BrickBox* region) {
+                                                 FusionStats& stats, const BrickBox* region,
+                                                 std::vector<BrickBox>* reach_boxes) {
   const int brick_level = map.brick_level();
   const Reaches reach = gather_reaches(
       to - from, [&](std::size_t i) { return load_frame(from + i); }, options, root, brick_level, region, progress_fn);
@@ -299,6 +300,17 @@ std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t t
     for (const auto& e : estimate) stats.plan_estimate_bytes += e.second;
     progress.tiles = cut_tiles(estimate, brick_level, 0.7 * double(map.memory_limit()), region);
     progress.tile = progress.tile_frames = progress.steps = 0;
+  }
+  reach_boxes->assign(to - from, BrickBox{});
+  for (std::size_t i = 0; i < reach.bricks.size(); ++i) {
+    BrickBox& box = (*reach_boxes)[i];
+    for (std::size_t k = 0; k < reach.bricks[i].size(); ++k) {
+      const BrickCoord c = BrickCoord::unpack(reach.bricks[i][k]);
+      const BrickCoord hi{c.x + 1, c.y + 1, c.z + 1};
+      box = k == 0 ? BrickBox{c, hi}
+                   : BrickBox{{std::min(box.lo.x, c.x), std::min(box.lo.y, c.y), std::min(box.lo.z, c.z)},
+                              {std::max(box.hi.x, hi.x), std::max(box.hi.y, hi.y), std::max(box.hi.z, hi.z)}};
+    }
   }
   std::vector<std::size_t> ids(to - from);
   for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = from + i;
@@ -459,12 +471,14 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
         for (std::size_t i = from; i < to; ++i) tile_frames[0].push_back(i);
       } else {
         const auto plan_start = Clock::now();
+        std::vector<BrickBox> reach_boxes;
         tile_frames = plan_sweep(
             from, to, [&](std::size_t i) {
               LateSamples late;
               return load_frame(i, &late);
             },
-            options, root, map, hooks.progress, progress, stats, hooks.region);
+            options, root, map, hooks.progress, progress, stats, hooks.region, &reach_boxes);
+        if (journal) journal->reached(from, reach_boxes);
         plan_seconds += std::chrono::duration<double>(Clock::now() - plan_start).count();
       }
       progress.sweep_end = to;

@@ -158,6 +158,13 @@ class FusionJournal {
   // A tile of a sweep of several is done and its bricks written: a checkpoint costs no more
   // writes now, and saves redoing the tile.
   virtual void tile_done(const IntegrationProgress& progress, BrickMap& map) = 0;
+  // Depth maps [from, from + boxes.size()) of the job's order write only into the bricks of these
+  // boxes (an empty box: none), as a sweep's plan found before integrating them; a damaged tile
+  // is then rebuilt from the depth maps that reach its brick alone.
+  virtual void reached(std::size_t from, const std::vector<BrickBox>& boxes) {
+    (void)from;
+    (void)boxes;
+  }
   // Integration is complete: the final checkpoint.
   virtual void integrated(const IntegrationProgress& progress, BrickMap& map) = 0;
   // Integration stopped early (FusionHooks::stop): a checkpoint.

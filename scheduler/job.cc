@@ -262,6 +262,8 @@ Job::Job(JobOptions options, std::string config, std::string input, std::string 
        "  hash TEXT NOT NULL);"
        "CREATE TABLE IF NOT EXISTS manifest(bx INTEGER, by INTEGER, bz INTEGER, generation INTEGER NOT NULL,"
        "  bytes INTEGER NOT NULL, PRIMARY KEY(bx, by, bz));"
+       "CREATE TABLE IF NOT EXISTS reach(idx INTEGER PRIMARY KEY, lx INTEGER NOT NULL, ly INTEGER NOT NULL,"
+       "  lz INTEGER NOT NULL, hx INTEGER NOT NULL, hy INTEGER NOT NULL, hz INTEGER NOT NULL);"
        "CREATE TABLE IF NOT EXISTS extract_done(pass TEXT NOT NULL, item INTEGER NOT NULL, PRIMARY KEY(pass, item));"
        "CREATE TABLE IF NOT EXISTS extract_blob(box TEXT NOT NULL, dest INTEGER NOT NULL, src INTEGER NOT NULL,"
        "  seq INTEGER NOT NULL, offset INTEGER NOT NULL, stored INTEGER NOT NULL, raw INTEGER NOT NULL);",
@@ -742,6 +744,36 @@ std::vector<std::string> Job::recorded_inputs(const std::filesystem::path& dir) 
   }
   sqlite3_close(db);
   return names;
+}
+
+void Job::reached(std::size_t from, const std::vector<BrickBox>& boxes) {
+  // Committed before the depth maps are integrated, so every checkpoint's depth maps have theirs.
+  const std::string where = options_.dir.string();
+  Transaction t(db_, where);
+  Statement ins(db_, "INSERT OR REPLACE INTO reach(idx, lx, ly, lz, hx, hy, hz) VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+                where);
+  for (std::size_t i = 0; i < boxes.size(); ++i) {
+    const BrickBox& b = boxes[i];
+    ins.bind(1, std::int64_t(from + i)).bind(2, b.lo.x).bind(3, b.lo.y).bind(4, b.lo.z);
+    ins.bind(5, b.hi.x).bind(6, b.hi.y).bind(7, b.hi.z).run();
+  }
+  t.commit();
+}
+
+std::vector<std::size_t> Job::depth_maps_reaching(const BrickBox& region, std::size_t n) const {
+  std::vector<char> reaches(n, 1);  // no record: it may
+  Statement s(db_, "SELECT idx, lx, ly, lz, hx, hy, hz FROM reach WHERE idx < ?1", options_.dir.string());
+  s.bind(1, std::int64_t(n));
+  while (s.step()) {
+    const auto at = [&](int col) { return std::uint32_t(s.integer(col)); };
+    const BrickBox b{{at(1), at(2), at(3)}, {at(4), at(5), at(6)}};
+    reaches[std::size_t(s.integer(0))] = b.lo.x < region.hi.x && region.lo.x < b.hi.x && b.lo.y < region.hi.y &&
+                                         region.lo.y < b.hi.y && b.lo.z < region.hi.z && region.lo.z < b.hi.z;
+  }
+  std::vector<std::size_t> out;
+  for (std::size_t i = 0; i < n; ++i)
+    if (reaches[i]) out.push_back(i);
+  return out;
 }
 
 void Job::inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) {

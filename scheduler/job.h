@@ -96,6 +96,7 @@ class Job : public FusionJournal {
   void inputs_added(const std::vector<FrameIdentity>& frames, std::size_t from) override;
   void step_done(const IntegrationProgress& progress, BrickMap& map) override;
   void tile_done(const IntegrationProgress& progress, BrickMap& map) override;
+  void reached(std::size_t from, const std::vector<BrickBox>& boxes) override;
   void integrated(const IntegrationProgress& progress, BrickMap& map) override;
   void interrupted(const IntegrationProgress& progress, BrickMap& map) override;
   ExtractJournal* extraction(const std::string& signature, const std::filesystem::path& scratch) override;
@@ -130,6 +131,10 @@ class Job : public FusionJournal {
   // How many of the job's depth maps (the first ones, in its order) the last checkpoint's brick `c`
   // holds; nullopt for a brick of the tile under way in a sweep (the journal does not say which).
   std::optional<std::size_t> depth_maps_in_brick(BrickCoord c) const;
+  // Of the job's first `n` depth maps, the positions (in the job's order) of those that can write
+  // into a brick of `region`: their recorded reach meets it, or none was recorded (a job of an
+  // earlier version, a cluster merge).
+  std::vector<std::size_t> depth_maps_reaching(const BrickBox& region, std::size_t n) const;
   // Replaces the checkpoint's tile of brick `c` (found damaged) by the tile of `c` in `rebuilt`,
   // the field of a job that re-integrated the depth maps this job integrated into that brick
   // alone: linked under a new generation and committed in one transaction.

@@ -4,7 +4,6 @@
 #include <chrono>
 #include <filesystem>
 #include <map>
-#include <numeric>
 #include <optional>
 #include <string>
 
@@ -32,17 +31,20 @@ TileRebuild rebuild_tiles(Job& job, const std::vector<DamagedTile>& damage, cons
     r.depth_maps.push_back(*held);
   }
   const std::filesystem::path dir = job.dir() / "rebuild";
+  r.reaching.assign(damage.size(), 0);
+  const std::size_t step = std::size_t(options.input.frame_step);
   for (const auto& [n, bricks] : passes) {
-    std::vector<std::size_t> list(n);
-    if (frames)
-      list.assign(frames->begin(), frames->begin() + std::ptrdiff_t(n));
-    else
-      std::iota(list.begin(), list.end(), std::size_t{0});
     BrickBox region{bricks.front(), {bricks.front().x + 1, bricks.front().y + 1, bricks.front().z + 1}};
     for (const BrickCoord& c : bricks) {
       region.lo = {std::min(region.lo.x, c.x), std::min(region.lo.y, c.y), std::min(region.lo.z, c.z)};
       region.hi = {std::max(region.hi.x, c.x + 1), std::max(region.hi.y, c.y + 1), std::max(region.hi.z, c.z + 1)};
     }
+    // The depth maps that can write into the region, in the job's order (those that cannot would
+    // change nothing there), as source indices: the job's list, or every step-th depth map.
+    std::vector<std::size_t> list = job.depth_maps_reaching(region, n);
+    for (std::size_t& i : list) i = frames ? (*frames)[i] : i * step;
+    for (std::size_t i = 0; i < damage.size(); ++i)
+      if (r.depth_maps[i] == n) r.reaching[i] = list.size();
     std::filesystem::remove_all(dir);
     {
       JobOptions o;

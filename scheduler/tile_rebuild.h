@@ -15,11 +15,13 @@ namespace sf {
 struct TileRebuild {
   std::vector<std::size_t> depth_maps;  // per damaged tile, the depth maps re-integrated into its brick
   std::size_t passes = 0;               // passes over the depth maps
+  std::vector<std::size_t> reaching;    // per damaged tile, those of them read: the ones reaching its pass's region
   double seconds = 0;
 };
 
 // Rebuilds the bricks `damage` names into `job`'s checkpoint. Reading and triangulating the depth
-// maps is most of a rebuild's cost, so bricks that hold the same depth maps share one pass, whose
+// maps is most of a rebuild's cost, so only those whose recorded reach meets the bricks are read
+// (Job::depth_maps_reaching), and bricks that hold the same depth maps share one pass, whose
 // region is their bounding box of bricks (at most the whole field: one integration). `frames` is
 // the job's list of depth maps when it has one (a cluster tile's), else every depth map of
 // `source` in order. Runs in the caller's TBB arena. Throws InputError, before changing anything,

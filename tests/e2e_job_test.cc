@@ -592,7 +592,8 @@ void flip_byte(const fs::path& file, std::streamoff at) {
 
 // Issue 6: a tile of the checkpoint found damaged (checksum) or missing is rebuilt by
 // re-integrating the job's depth maps into its brick alone, and the job goes on to the same
-// mesh: after integration (one tile, and four at once: rebuilt together in one pass); in the
+// mesh: after integration (one tile; four at once, rebuilt together in one pass; four of a job of
+// every other depth map); in the
 // middle of a brick extraction (whose finished bricks are kept);
 // and stopped in the middle of a sweep of tiles (a memory limit far below the field) with every
 // tile damaged, where a brick of the tile under way cannot be rebuilt and the job says so.
@@ -601,7 +602,11 @@ TEST(Job, DamagedOrMissingTileIsRebuiltFromTheDepthMapsAndGivesTheSameMesh) {
   const fs::path ref = dir / "ref.ply";
   ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
   const std::string expected = bytes_of(ref);
-  for (const std::string damage : {"payload", "missing", "several", "extracting", "sweep"}) {
+  // Every other depth map: the rebuild must read the job's depth maps, not the input's first ones.
+  const std::string every_other = kScene + " --set input.frame_step=2";
+  ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + "2 -q " + every_other).code, 0);
+  const std::string expected_every_other = bytes_of(ref.string() + "2");
+  for (const std::string damage : {"payload", "missing", "several", "frame_step", "extracting", "sweep"}) {
     SCOPED_TRACE(damage);
     const fs::path out = dir / (damage + ".ply"), job = dir / (damage + ".job");
     const std::string fuse = "fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() + " -q ";
@@ -619,8 +624,8 @@ TEST(Job, DamagedOrMissingTileIsRebuiltFromTheDepthMapsAndGivesTheSameMesh) {
       EXPECT_GT(st["sweep"]["tiles"].get<int>(), 1) << st.dump();
       tiles = largest_tiles(job, 1000);
     } else {
-      first = scalefuse(fuse + "--integrate-only " + kScene);
-      tiles = largest_tiles(job, damage == "several" ? 4 : 1);
+      first = scalefuse(fuse + "--integrate-only " + (damage == "frame_step" ? every_other : kScene));
+      tiles = largest_tiles(job, damage == "several" || damage == "frame_step" ? 4 : 1);
     }
     ASSERT_EQ(first.code, damage == "extracting" || damage == "sweep" ? 128 + 15 : 0) << first.output;
     ASSERT_FALSE(tiles.empty());
@@ -663,7 +668,7 @@ TEST(Job, DamagedOrMissingTileIsRebuiltFromTheDepthMapsAndGivesTheSameMesh) {
       EXPECT_EQ(rebuilt, 4u) << resumed.output;
       EXPECT_NE(resumed.output.find("for the 4 tiles, in 1 pass)"), std::string::npos) << resumed.output;
     }
-    EXPECT_TRUE(bytes_of(out) == expected);
+    EXPECT_TRUE(bytes_of(out) == (damage == "frame_step" ? expected_every_other : expected));
     EXPECT_FALSE(fs::exists(job / "rebuild"));
     if (damage == "extracting") {
       const auto stats = nlohmann::json::parse(bytes_of(out.string() + ".json"));

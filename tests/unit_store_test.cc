@@ -142,6 +142,29 @@ TEST(Job, ASecondProcessOnTheSameJobIsRefused) {
   test::expect_input_error([&] { Job second(o, "a = 1\n", "in", "out.ply"); }, "job", "another scalefuse process");
 }
 
+// A rebuild reads only the depth maps whose recorded reach meets the damaged bricks; one with no
+// record (a job of an earlier version, a cluster merge) may reach anything.
+TEST(Job, DepthMapsReachingARegionFollowTheRecordedReach) {
+  const auto dir = test::scratch_dir("job-reach");
+  JobOptions o;
+  o.dir = dir / "job";
+  Job job(o, "a = 1\n", "in", "out.ply");
+  // Depth maps 1..4 planned: 1 reaches bricks x,y,z in [0,2), 2 only brick (5,5,5), 3 nothing,
+  // 4 bricks [2,4) x [0,1) x [0,1). Depth map 0 and 5 have no record.
+  job.reached(1, {BrickBox{{0, 0, 0}, {2, 2, 2}}, BrickBox{{5, 5, 5}, {6, 6, 6}}, BrickBox{}, BrickBox{{2, 0, 0}, {4, 1, 1}}});
+  const BrickBox brick_1_1_1{{1, 1, 1}, {2, 2, 2}};
+  EXPECT_EQ(job.depth_maps_reaching(brick_1_1_1, 6), (std::vector<std::size_t>{0, 1, 5}));
+  EXPECT_EQ(job.depth_maps_reaching(brick_1_1_1, 2), (std::vector<std::size_t>{0, 1}));  // the first 2 only
+  // Boxes that touch without overlapping do not meet: [0,2) and [2,4) along x.
+  const BrickBox brick_2_0_0{{2, 0, 0}, {3, 1, 1}};
+  EXPECT_EQ(job.depth_maps_reaching(brick_2_0_0, 6), (std::vector<std::size_t>{0, 4, 5}));
+  const BrickBox both{{1, 0, 0}, {6, 6, 6}};
+  EXPECT_EQ(job.depth_maps_reaching(both, 6), (std::vector<std::size_t>{0, 1, 2, 4, 5}));
+  // Planned again (a resumed sweep): the record is replaced, not added to.
+  job.reached(2, {BrickBox{{1, 1, 1}, {2, 2, 2}}});
+  EXPECT_EQ(job.depth_maps_reaching(brick_1_1_1, 6), (std::vector<std::size_t>{0, 1, 2, 5}));
+}
+
 TEST(Job, ByteSizes) {
   EXPECT_EQ(parse_byte_size("1.5G", "x"), std::size_t(1.5 * 1024 * 1024 * 1024));
   EXPECT_EQ(parse_byte_size("800M", "x"), std::size_t(800) * 1024 * 1024);
