@@ -6,7 +6,7 @@
 #            by re-integrating every depth map of the job into its brick alone;
 #   K largest  deletes the K largest tiles (K=4 by default), and all deletes every tile: all damaged
 #            tiles are found at once and rebuilt in one pass over the depth maps.
-# Prints per case the median wall time of the resume and of the rebuilds as the program reports
+# Prints per case the depth maps read (those whose recorded reach meets the lost bricks), the median wall time of the resume and of the rebuilds as the program reports
 # them, against the wall time of the job's whole integration (a ratio measured in one run).
 # Usage: bench/tile_rebuild.sh INPUT RUNS [fuse args...]
 #   e.g. bench/tile_rebuild.sh ../shared/data/stanford_bunny/scans 5 --config configs/laser.toml
@@ -49,8 +49,9 @@ for run in $(seq "$RUNS"); do
     [ "$rebuilt" = "$expected" ] || { echo "$case: $rebuilt rebuilds reported, $expected expected:" >&2; cat "$WORK/stderr" >&2; exit 1; }
     # every line of one resume reports the time of all its rebuilds together
     seconds=$(grep -o 'that reach it ([0-9.]* s' "$WORK/stderr" | head -1 | grep -o '[0-9.]*' || true)
+    reading=$(grep -o "re-integrating the [0-9]* of the job" "$WORK/stderr" | head -1 | grep -o '[0-9]*' || echo 0)
     kib=0; for t in ${victims[$case]}; do kib=$((kib + $(stat -c %s "$t") / 1024)); done
-    printf '%s\t%s\t%s\t%s\t%s\n' "$case" "$wall" "${seconds:-0}" "$expected" "$kib" >> "$WORK/lines"
+    printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$case" "$wall" "${seconds:-0}" "$expected" "$kib" "${reading:-0}" >> "$WORK/lines"
   done
 done
 python3 - "$WORK/lines" "$full" "$RUNS" <<'PY'
@@ -58,11 +59,11 @@ import statistics, sys
 lines, full, runs = sys.argv[1], float(sys.argv[2]), sys.argv[3]
 cases = {}
 for line in open(lines):
-    case, wall, seconds, count, kib = line.split("\t")
-    cases.setdefault(case, []).append((float(wall), float(seconds), int(count), int(kib)))
-print(f"median of {runs} runs          tiles  tile KiB  resume wall  rebuild (reported)  rebuild / integration")
+    case, wall, seconds, count, kib, reading = line.split("\t")
+    cases.setdefault(case, []).append((float(wall), float(seconds), int(count), int(kib), int(reading)))
+print(f"median of {runs} runs          tiles  tile KiB  maps read  resume wall  rebuild (reported)  rebuild / integration")
 for case, rows in cases.items():
     wall = statistics.median(r[0] for r in rows)
     rebuild = statistics.median(r[1] for r in rows)
-    print(f"{case:28s} {rows[0][2]:5d} {rows[0][3]:9d} {wall:10.2f} s {rebuild:16.2f} s {rebuild / full:19.3f}")
+    print(f"{case:28s} {rows[0][2]:5d} {rows[0][3]:9d} {rows[0][4]:10d} {wall:10.2f} s {rebuild:16.2f} s {rebuild / full:19.3f}")
 PY
