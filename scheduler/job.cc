@@ -196,6 +196,25 @@ IntegrationProgress read_progress(sqlite3* db, const std::string& where) {
   return p;
 }
 
+// The last checkpoint's bricks and tiles, in brick order.
+std::vector<ManifestEntry> read_manifest(sqlite3* db, const std::string& where) {
+  std::vector<ManifestEntry> manifest;
+  Statement s(db, "SELECT bx, by, bz, generation, bytes FROM manifest ORDER BY bz, by, bx", where);
+  while (s.step()) {
+    ManifestEntry e;
+    e.coord = {std::uint32_t(s.integer(0)), std::uint32_t(s.integer(1)), std::uint32_t(s.integer(2))};
+    e.generation = std::uint64_t(s.integer(3));
+    e.bytes = std::uint64_t(s.integer(4));
+    manifest.push_back(e);
+  }
+  return manifest;
+}
+
+DamagedTile missing_tile(const TileStore& store, const ManifestEntry& e) {
+  return DamagedTile(store.path(e.coord, e.generation).string() + ": tile of the last checkpoint is missing", e.coord,
+                     e.generation);
+}
+
 // Records depth maps [from, frames.size()) in the inputs table (inside the caller's transaction).
 void insert_inputs(sqlite3* db, const std::vector<FrameIdentity>& frames, std::size_t from, const std::string& where) {
   Statement ins(db, "INSERT INTO inputs(idx, name, size, hash) VALUES(?1, ?2, ?3, ?4)", where);
@@ -387,16 +406,9 @@ Job::Field Job::field(const std::filesystem::path& dir) {
   Field f;
   try {
     const std::string where = file.string();
-    Statement s(db, "SELECT bx, by, bz, generation, bytes FROM manifest ORDER BY bz, by, bx", where);
     const TileStore names(dir / "tiles");
-    while (s.step()) {
-      ManifestEntry e;
-      e.coord = {std::uint32_t(s.integer(0)), std::uint32_t(s.integer(1)), std::uint32_t(s.integer(2))};
-      e.generation = std::uint64_t(s.integer(3));
-      e.bytes = std::uint64_t(s.integer(4));
-      f.manifest.push_back(e);
-      f.tiles.push_back(names.path(e.coord, e.generation));
-    }
+    f.manifest = read_manifest(db, where);
+    for (const ManifestEntry& e : f.manifest) f.tiles.push_back(names.path(e.coord, e.generation));
     const std::string g = meta(db, "max_generation", where);
     f.max_generation = g.empty() ? 0 : std::stoull(g);
   } catch (...) {
@@ -455,24 +467,14 @@ std::optional<std::size_t> Job::depth_maps_in_brick(BrickCoord c) const {
 }
 
 std::vector<DamagedTile> Job::damaged_tiles() const {
-  std::vector<ManifestEntry> manifest;
-  {
-    Statement s(db_, "SELECT bx, by, bz, generation FROM manifest ORDER BY bz, by, bx", options_.dir.string());
-    while (s.step()) {
-      ManifestEntry e;
-      e.coord = {std::uint32_t(s.integer(0)), std::uint32_t(s.integer(1)), std::uint32_t(s.integer(2))};
-      e.generation = std::uint64_t(s.integer(3));
-      manifest.push_back(e);
-    }
-  }
+  const std::vector<ManifestEntry> manifest = read_manifest(db_, options_.dir.string());
   const std::optional<int> brick_level = fixed_brick_level();
   if (!brick_level) return {};
   std::vector<std::optional<DamagedTile>> found(manifest.size());
   tbb::parallel_for(std::size_t(0), manifest.size(), [&](std::size_t i) {
     const ManifestEntry& e = manifest[i];
-    const std::filesystem::path path = store_->path(e.coord, e.generation);
-    if (!std::filesystem::exists(path)) {
-      found[i] = DamagedTile(path.string() + ": tile of the last checkpoint is missing", e.coord, e.generation);
+    if (!std::filesystem::exists(store_->path(e.coord, e.generation))) {
+      found[i] = missing_tile(*store_, e);
       return;
     }
     try {
@@ -584,23 +586,11 @@ IntegrationProgress Job::begin(const std::vector<FrameIdentity>& frames, const R
   if (meta(db_, "root", where) != root_text(root) || meta(db_, "brick_level", where) != std::to_string(map.brick_level()))
     throw JobMismatch(where + ": the root cube or brick level differs from the job's");
   // Restore the last checkpoint.
-  std::vector<ManifestEntry> manifest;
+  const std::vector<ManifestEntry> manifest = read_manifest(db_, where);
   std::set<std::pair<std::uint64_t, std::uint64_t>> keep;
-  {
-    Statement s(db_, "SELECT bx, by, bz, generation, bytes FROM manifest ORDER BY bz, by, bx", where);
-    while (s.step()) {
-      ManifestEntry e;
-      e.coord = {std::uint32_t(s.integer(0)), std::uint32_t(s.integer(1)), std::uint32_t(s.integer(2))};
-      e.generation = std::uint64_t(s.integer(3));
-      e.bytes = std::uint64_t(s.integer(4));
-      manifest.push_back(e);
-      keep.insert({e.coord.packed(), e.generation});
-    }
-  }
+  for (const ManifestEntry& e : manifest) keep.insert({e.coord.packed(), e.generation});
   for (const ManifestEntry& e : manifest)
-    if (!std::filesystem::exists(store_->path(e.coord, e.generation)))
-      throw DamagedTile(store_->path(e.coord, e.generation).string() + ": tile of the last checkpoint is missing", e.coord,
-                        e.generation);
+    if (!std::filesystem::exists(store_->path(e.coord, e.generation))) throw missing_tile(*store_, e);
   store_->remove_all_except(keep);
   map.restore(manifest, std::stoull(meta(db_, "max_generation", where)));
   progress_ = read_progress(db_, where);
