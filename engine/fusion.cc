@@ -304,13 +304,7 @@ std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t t
   reach_boxes->assign(to - from, BrickBox{});
   for (std::size_t i = 0; i < reach.bricks.size(); ++i) {
     BrickBox& box = (*reach_boxes)[i];
-    for (std::size_t k = 0; k < reach.bricks[i].size(); ++k) {
-      const BrickCoord c = BrickCoord::unpack(reach.bricks[i][k]);
-      const BrickCoord hi{c.x + 1, c.y + 1, c.z + 1};
-      box = k == 0 ? BrickBox{c, hi}
-                   : BrickBox{{std::min(box.lo.x, c.x), std::min(box.lo.y, c.y), std::min(box.lo.z, c.z)},
-                              {std::max(box.hi.x, hi.x), std::max(box.hi.y, hi.y), std::max(box.hi.z, hi.z)}};
-    }
+    for (const auto packed : reach.bricks[i]) box.extend(BrickCoord::unpack(packed));
   }
   std::vector<std::size_t> ids(to - from);
   for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = from + i;

@@ -757,8 +757,7 @@ std::vector<std::size_t> Job::depth_maps_reaching(const BrickBox& region, std::s
   while (s.step()) {
     const auto at = [&](int col) { return std::uint32_t(s.integer(col)); };
     const BrickBox b{{at(1), at(2), at(3)}, {at(4), at(5), at(6)}};
-    reaches[std::size_t(s.integer(0))] = b.lo.x < region.hi.x && region.lo.x < b.hi.x && b.lo.y < region.hi.y &&
-                                         region.lo.y < b.hi.y && b.lo.z < region.hi.z && region.lo.z < b.hi.z;
+    reaches[std::size_t(s.integer(0))] = b.meets(region);
   }
   std::vector<std::size_t> out;
   for (std::size_t i = 0; i < n; ++i)

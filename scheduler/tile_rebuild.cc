@@ -34,11 +34,8 @@ TileRebuild rebuild_tiles(Job& job, const std::vector<DamagedTile>& damage, cons
   r.reaching.assign(damage.size(), 0);
   const std::size_t step = std::size_t(options.input.frame_step);
   for (const auto& [n, bricks] : passes) {
-    BrickBox region{bricks.front(), {bricks.front().x + 1, bricks.front().y + 1, bricks.front().z + 1}};
-    for (const BrickCoord& c : bricks) {
-      region.lo = {std::min(region.lo.x, c.x), std::min(region.lo.y, c.y), std::min(region.lo.z, c.z)};
-      region.hi = {std::max(region.hi.x, c.x + 1), std::max(region.hi.y, c.y + 1), std::max(region.hi.z, c.z + 1)};
-    }
+    BrickBox region;
+    for (const BrickCoord& c : bricks) region.extend(c);
     // The depth maps that can write into the region, in the job's order (those that cannot would
     // change nothing there), as source indices: the job's list, or every step-th depth map.
     std::vector<std::size_t> list = job.depth_maps_reaching(region, n);

@@ -5,6 +5,8 @@
 # Any report fails the test that triggered it (halt_on_error, no recovery from UB). Suppressions
 # in scripts/sanitizers/ cover third-party libraries we do not build (each line says why).
 # e.g. scripts/sanitize.sh tsan -R 'unit_|extract_'     (a subset: TSan slows threads 5-15x)
+# Each test may take SAN_TEST_TIMEOUT seconds (default 2 h: under TSan on 2 cores the longest e2e
+# test took 3,579 s, too near the 1-hour limit of a Release build's ctest).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MODE=${1:?usage: scripts/sanitize.sh asan|tsan [ctest args...]}
@@ -32,7 +34,7 @@ esac
 BUILD=build-$MODE
 mkdir -p "$BUILD"
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS="$FLAGS" \
-  -DCMAKE_EXE_LINKER_FLAGS="$FLAGS" -DSCALEFUSE_TEST_TIMEOUT=3600 ${EXTRA_CMAKE:-} > "$BUILD/cmake.log"
+  -DCMAKE_EXE_LINKER_FLAGS="$FLAGS" -DSCALEFUSE_TEST_TIMEOUT=${SAN_TEST_TIMEOUT:-7200} ${EXTRA_CMAKE:-} > "$BUILD/cmake.log"
 cmake --build "$BUILD" -j"${JOBS:-2}"
 cd "$BUILD"
 status=0

@@ -42,6 +42,21 @@ struct BrickBox {
   bool contains(BrickCoord c) const {
     return c.x >= lo.x && c.x < hi.x && c.y >= lo.y && c.y < hi.y && c.z >= lo.z && c.z < hi.z;
   }
+  bool empty() const { return lo.x >= hi.x || lo.y >= hi.y || lo.z >= hi.z; }
+  // Grows the box to hold brick c (an empty box becomes c alone).
+  void extend(BrickCoord c) {
+    const BrickCoord c1{c.x + 1, c.y + 1, c.z + 1};
+    if (empty()) {
+      lo = c, hi = c1;
+      return;
+    }
+    lo = {std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z)};
+    hi = {std::max(hi.x, c1.x), std::max(hi.y, c1.y), std::max(hi.z, c1.z)};
+  }
+  // Whether the boxes share a brick (boxes that only touch do not).
+  bool meets(const BrickBox& o) const {
+    return lo.x < o.hi.x && o.lo.x < hi.x && lo.y < o.hi.y && o.lo.y < hi.y && lo.z < o.hi.z && o.lo.z < hi.z;
+  }
   // The voxel indices [first, last] of level `level` along `axis` (0..2) whose voxels belong
   // (brick_of) to the box's bricks; first > last if none.
   void voxel_range(int level, int brick_level, int axis, std::int64_t* first, std::int64_t* last) const;

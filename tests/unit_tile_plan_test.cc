@@ -86,6 +86,26 @@ TEST(BrickBox, VoxelRangeIsWhereBrickOfPutsTheVoxels) {
       }
 }
 
+TEST(BrickBox, ExtendHoldsEveryBrickAndMeetsNeedsASharedBrick) {
+  BrickBox box;
+  EXPECT_TRUE(box.empty());
+  box.extend({3, 1, 4});
+  EXPECT_FALSE(box.empty());
+  EXPECT_EQ(box.lo.x, 3u); EXPECT_EQ(box.lo.y, 1u); EXPECT_EQ(box.lo.z, 4u);
+  EXPECT_EQ(box.hi.x, 4u); EXPECT_EQ(box.hi.y, 2u); EXPECT_EQ(box.hi.z, 5u);
+  box.extend({0, 5, 4});  // by hand: x 0..3, y 1..5, z 4 -> [0,4) x [1,6) x [4,5)
+  EXPECT_EQ(box.lo.x, 0u); EXPECT_EQ(box.lo.y, 1u); EXPECT_EQ(box.lo.z, 4u);
+  EXPECT_EQ(box.hi.x, 4u); EXPECT_EQ(box.hi.y, 6u); EXPECT_EQ(box.hi.z, 5u);
+  EXPECT_TRUE(box.contains({2, 3, 4}));
+  EXPECT_FALSE(box.contains({2, 3, 5}));
+  // Sharing brick (3, 5, 4) meets; touching along x (x 4..) or z (z 5..) does not; nor does the empty box.
+  EXPECT_TRUE(box.meets(BrickBox{{3, 5, 4}, {9, 9, 9}}));
+  EXPECT_TRUE((BrickBox{{3, 5, 4}, {9, 9, 9}}).meets(box));
+  EXPECT_FALSE(box.meets(BrickBox{{4, 0, 0}, {9, 9, 9}}));
+  EXPECT_FALSE(box.meets(BrickBox{{0, 0, 5}, {9, 9, 9}}));
+  EXPECT_FALSE(box.meets(BrickBox{}));
+}
+
 TEST(TilePlan, CutsTheLongestAxisAtTheWeightedMedian) {
   // Four bricks in a row along y, weights 1, 1, 1, 3, target 3: the median splits {y 0..2} from
   // {y 3}; the first half (3) fits. The grid is 8 bricks per axis; tiles cover it all.
