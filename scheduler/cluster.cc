@@ -78,7 +78,12 @@ void write_cluster_plan(const std::filesystem::path& dir, const ClusterPlan& pla
 ClusterPlan read_cluster_plan(const std::filesystem::path& dir) {
   const std::filesystem::path path = dir / "plan.json";
   std::ifstream in(path);
-  if (!in) throw input_error(path.string(), "no plan here (make one with: scalefuse plan INPUT --tiles N --job DIR)");
+  if (!in) {
+    const int err = errno;
+    std::error_code ec;
+    if (std::filesystem::exists(path, ec)) throw input_error(path.string(), std::string("cannot read: ") + std::strerror(err));
+    throw input_error(path.string(), "no plan here (make one with: scalefuse plan INPUT --tiles N --job DIR)");
+  }
   ClusterPlan plan;
   try {
     const nlohmann::json j = nlohmann::json::parse(in);

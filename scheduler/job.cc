@@ -6,9 +6,13 @@
 #include <sqlite3.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -176,9 +180,32 @@ std::vector<BrickBox> parse_tiles(const std::string& text, const std::string& wh
   return tiles;
 }
 
-std::size_t meta_count(sqlite3* db, const std::string& key, const std::string& where) {
+// The journal's file for a message, given the job folder or the file itself.
+std::string journal_file(const std::string& where) {
+  const std::string name = "job.sqlite";
+  const bool is_file = where.size() >= name.size() && where.compare(where.size() - name.size(), name.size(), name) == 0;
+  return is_file ? where : (std::filesystem::path(where) / name).string();
+}
+
+// A number the journal keeps as text. A damaged value is a fault of the job folder (bad input,
+// exit 2, naming the journal), not an internal error.
+std::uint64_t meta_number(sqlite3* db, const std::string& key, const std::string& where, bool required,
+                          std::uint64_t max = std::numeric_limits<std::uint64_t>::max()) {
   const std::string v = meta(db, key, where);
-  return v.empty() ? 0 : std::stoull(v);
+  if (v.empty()) {
+    if (required) throw InputError(journal_file(where) + ": job journal: " + key + " is missing");
+    return 0;
+  }
+  std::uint64_t n = 0;
+  const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), n);
+  if (ec != std::errc() || end != v.data() + v.size() || n > max)
+    throw InputError(journal_file(where) + ": job journal: " + key + " is '" + v + "', not a number" +
+                     (max != std::numeric_limits<std::uint64_t>::max() ? " up to " + std::to_string(max) : ""));
+  return n;
+}
+
+std::size_t meta_count(sqlite3* db, const std::string& key, const std::string& where) {
+  return meta_number(db, key, where, false);
 }
 
 // The progress of the last committed checkpoint.
@@ -202,6 +229,9 @@ std::vector<ManifestEntry> read_manifest(sqlite3* db, const std::string& where) 
   Statement s(db, "SELECT bx, by, bz, generation, bytes FROM manifest ORDER BY bz, by, bx", where);
   while (s.step()) {
     ManifestEntry e;
+    for (int k = 0; k < 5; ++k)
+      if (s.integer(k) < 0 || (k < 3 && s.integer(k) >= (std::int64_t{1} << kMaxLevel)))
+        throw InputError(journal_file(where) + ": job journal: manifest row out of range");
     e.coord = {std::uint32_t(s.integer(0)), std::uint32_t(s.integer(1)), std::uint32_t(s.integer(2))};
     e.generation = std::uint64_t(s.integer(3));
     e.bytes = std::uint64_t(s.integer(4));
@@ -262,8 +292,10 @@ Job::Job(JobOptions options, std::string config, std::string input, std::string 
   // One writer per job: a second process on the same directory is refused, not interleaved. The
   // lock goes with the process, however it ends.
   lock_fd_ = ::open((options_.dir / "job.lock").c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (lock_fd_ < 0 || ::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
-    if (lock_fd_ >= 0) ::close(lock_fd_);
+  if (lock_fd_ < 0)
+    throw InputError((options_.dir / "job.lock").string() + ": cannot open the job's lock: " + std::strerror(errno));
+  if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
+    ::close(lock_fd_);
     throw InputError(options_.dir.string() + ": another scalefuse process is using this job");
   }
   const std::string where = (options_.dir / "job.sqlite").string();
@@ -396,7 +428,7 @@ std::optional<RootCube> Job::fixed_root() const {
 std::optional<int> Job::fixed_brick_level() const {
   const std::string text = meta(db_, "brick_level", options_.dir.string());
   if (text.empty()) return options_.brick_level;
-  return std::stoi(text);
+  return int(meta_number(db_, "brick_level", options_.dir.string(), true, kMaxLevel));
 }
 
 Job::Field Job::field(const std::filesystem::path& dir) {
@@ -409,8 +441,7 @@ Job::Field Job::field(const std::filesystem::path& dir) {
     const TileStore names(dir / "tiles");
     f.manifest = read_manifest(db, where);
     for (const ManifestEntry& e : f.manifest) f.tiles.push_back(names.path(e.coord, e.generation));
-    const std::string g = meta(db, "max_generation", where);
-    f.max_generation = g.empty() ? 0 : std::stoull(g);
+    f.max_generation = meta_number(db, "max_generation", where, false);
   } catch (...) {
     sqlite3_close(db);
     throw;
@@ -505,8 +536,8 @@ void Job::replace_tile(const Field& rebuilt, BrickCoord c) {
     throw InputError(store_->path(c, *old_generation).string() +
                      ": damaged tile, and re-integrating its depth maps gives no data for its brick");
   // A new generation: the damaged file stays until the journal refers to its replacement.
+  const std::uint64_t generation = meta_number(db_, "max_generation", where, true) + 1;
   const std::string old_max = meta(db_, "max_generation", where);
-  const std::uint64_t generation = std::stoull(old_max) + 1;
   link_tile(rebuilt.tiles[i], store_->path(c, generation));
   store_->sync();
   Transaction t(db_, where);
@@ -547,7 +578,7 @@ IntegrationProgress Job::begin(const std::vector<FrameIdentity>& frames, const R
     store_->remove_all_except({});
     return progress_ = IntegrationProgress{};
   }
-  if (std::stoi(version) != kJobVersion)
+  if (version != std::to_string(kJobVersion))
     throw InputError(where + ": job format version " + version + ", this build handles " + std::to_string(kJobVersion));
   // Same configuration and inputs, or refuse.
   const std::string old_config = meta(db_, "config", where);
@@ -592,7 +623,7 @@ IntegrationProgress Job::begin(const std::vector<FrameIdentity>& frames, const R
   for (const ManifestEntry& e : manifest)
     if (!std::filesystem::exists(store_->path(e.coord, e.generation))) throw missing_tile(*store_, e);
   store_->remove_all_except(keep);
-  map.restore(manifest, std::stoull(meta(db_, "max_generation", where)));
+  map.restore(manifest, meta_number(db_, "max_generation", where, true));
   progress_ = read_progress(db_, where);
   if (progress_.sweep_end > frames.size()) throw InputError(where + ": job journal: inconsistent sweep record");
   return progress_;

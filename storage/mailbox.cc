@@ -18,6 +18,7 @@ namespace sf {
 
 namespace {
 // A failed scratch file operation: the disk (full, failing) is ResourceError, the rest internal.
+// (A scratch file damaged on disk is the job folder's fault: InputError, exit 2, naming it.)
 [[noreturn]] void fail_io(const std::filesystem::path& path, const char* what) {
   const int err = errno;
   const std::string message = path.string() + ": " + what + ": " + std::strerror(err);
@@ -47,8 +48,8 @@ Mailbox::Mailbox(std::filesystem::path dir, std::string name, std::vector<Blob> 
     if (b.offset + b.stored > end_) {
       ::close(f.fd);
       f.fd = -1;
-      throw std::runtime_error(f.path.string() + ": scratch file shorter than the job's journal says (" +
-                               std::to_string(end_) + " bytes)");
+      throw InputError(f.path.string() + ": scratch file shorter than the job's journal says (" +
+                       std::to_string(end_) + " bytes)");
     }
     next = std::max(next, b.seq + 1);
     stored_ += b.stored;
@@ -104,8 +105,8 @@ int Mailbox::fd_of(std::uint32_t part) const {
   struct stat st;
   if (::fstat(fd, &st) != 0 || std::uint64_t(st.st_size) < f.needed) {
     ::close(fd);
-    throw std::runtime_error(f.path.string() + ": shorter than its tile's manifest says (" + std::to_string(f.needed) +
-                             " bytes)");
+    throw InputError(f.path.string() + ": shorter than its tile's manifest says (" + std::to_string(f.needed) +
+                     " bytes)");
   }
   f.fd = fd;
   return fd;
@@ -197,7 +198,7 @@ std::vector<unsigned char> Mailbox::collect_bytes(std::uint64_t dest) const {
       done += std::size_t(n);
     }
     const int got = LZ4_decompress_safe(packed.data(), reinterpret_cast<char*>(out.data() + at), int(e->stored), int(e->raw));
-    if (got != int(e->raw)) throw std::runtime_error(path.string() + ": damaged scratch data");
+    if (got != int(e->raw)) throw InputError(path.string() + ": damaged scratch data");
     at += e->raw;
   }
   return out;

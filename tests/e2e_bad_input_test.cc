@@ -622,6 +622,12 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
         "run-tile {dir}/job --tile 7 -q", "job", "tile 7");
   check("plan", "plan.json missing", planned_copy([](const fs::path& j) { fs::remove(j / "plan.json"); }), tile,
         "plan.json", "");
+  check("plan", "plan.json unreadable (mode 000)", planned_copy([](const fs::path& j) {
+    fs::permissions(j.parent_path(), fs::perms::all);
+    for (const auto& e : fs::recursive_directory_iterator(j)) fs::permissions(e.path(), fs::perms::all);
+    fs::permissions(j, fs::perms::all);
+    fs::permissions(j / "plan.json", fs::perms::none);
+  }), tile, "plan.json", "cannot read: Permission denied", true);
 
   // An integrated job (tiles and journal), copied per case; resume must refuse it.
   const fs::path integrated = root / "integrated";
@@ -711,6 +717,24 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
   check("journal", "job folder without a journal", integrated_copy([](const fs::path& j) {
     fs::remove(j / "job.sqlite");
   }), resume, "job", "");
+  // Damaged values inside an intact database: bad input too (exit 2), not an internal error.
+  auto journal_sql = [](const std::string& statement) {
+    return [statement](const fs::path& j) {
+      ASSERT_EQ(test::run_command("python3 -c \"import sqlite3; c = sqlite3.connect('" + (j / "job.sqlite").string() +
+                                  "'); c.execute('" + statement + "'); c.commit()\""),
+                0);
+    };
+  };
+  check("journal", "max_generation not a number",
+        integrated_copy(journal_sql("UPDATE meta SET value = \\'7x\\' WHERE key = \\'max_generation\\'")), resume,
+        "job.sqlite", "max_generation is '7x', not a number");
+  check("journal", "manifest row out of range",
+        integrated_copy(journal_sql("UPDATE manifest SET generation = -1")), resume, "job.sqlite",
+        "manifest row out of range");
+  check("journal", "job.lock not a file", integrated_copy([](const fs::path& j) {
+    fs::remove(j / "job.lock");
+    fs::create_directories(j / "job.lock");
+  }), resume, "job.lock", "cannot open the job's lock");
 }
 
 // --skip-bad: the bad depth maps are skipped, listed (stderr, JOB/skipped.txt, --stats), and the
