@@ -313,6 +313,13 @@ TEST(BadInputTable, ColmapTextModel) {
          t[0] = tokens(colmap_line(p, 0))[0];
          edit(p, old, joined(t));
        }, "images.txt", "duplicate image id"},
+      {"images.txt duplicate name", [](const fs::path& in) {
+         const fs::path p = in / "sparse/images.txt";
+         auto t = tokens(colmap_line(p, 2));
+         const std::string old = joined(t);
+         t[9] = tokens(colmap_line(p, 0))[9];
+         edit(p, old, joined(t));
+       }, "images.txt", "duplicate image name"},
       {"images.txt unknown camera", [](const fs::path& in) {
          const fs::path p = in / "sparse/images.txt";
          auto t = tokens(colmap_line(p, 0));
