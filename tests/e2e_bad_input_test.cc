@@ -361,7 +361,7 @@ TEST(BadInputTable, ColmapBinaryModel) {
          std::string s = read_all(in / "sparse/images.bin");
          write_all(in / "sparse/images.bin", u64(std::uint64_t(1) << 60) + s.substr(8));
        }, "images.bin", "more than the file can hold"},
-      {"images.bin name without its NUL", [](const fs::path& in) {
+      {"images.bin cut inside the first name", [](const fs::path& in) {
          // Count (8), then the first image: id (4), qvec (32), tvec (24), camera id (4), name.
          std::string s = read_all(in / "sparse/images.bin");
          write_all(in / "sparse/images.bin", s.substr(0, 8 + 64 + 4 + 7));
@@ -584,16 +584,16 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
   };
   auto nothing = [](const fs::path&) {};
   check("config", "missing file", nothing, fuse + "--config {dir}/none.toml", "none.toml", "not found");
-  check("config", "TOML syntax error", config("[integrate\nlambda = 1\n"), fuse + "--config {dir}/c.toml", "c.toml", "");
+  check("config", "TOML syntax error", config("[integrate\nlambda = 1\n"), fuse + "--config {dir}/c.toml", "c.toml", "parsing table header");
   check("config", "unknown key", config("[integrate]\nlambada = 1\n"), fuse + "--config {dir}/c.toml", "c.toml",
         "lambada");
   check("config", "wrong type", config("[integrate]\nlambda = \"one\"\n"), fuse + "--config {dir}/c.toml", "c.toml",
         "lambda");
   check("config", "out of range", config("[integrate]\nlambda = -1\n"), fuse + "--config {dir}/c.toml", "c.toml",
         "integrate.lambda must be");
-  check("config", "NaN value", config("[integrate]\ngamma = nan\n"), fuse + "--config {dir}/c.toml", "gamma", "");
-  check("config", "--set without '='", nothing, fuse + "--set integrate.lambda", "integrate.lambda", "");
-  check("config", "--set unknown key", nothing, fuse + "--set nope.x=1", "nope.x", "");
+  check("config", "NaN value", config("[integrate]\ngamma = nan\n"), fuse + "--config {dir}/c.toml", "gamma", "expects a number");
+  check("config", "--set without '='", nothing, fuse + "--set integrate.lambda", "integrate.lambda", "expected key=value");
+  check("config", "--set unknown key", nothing, fuse + "--set nope.x=1", "nope.x", "unknown parameter");
   check("config", "unreadable (mode 000)", [](const fs::path& dir) {
     write_all(dir / "c.toml", "[integrate]\nlambda = 1\n");
     fs::permissions(dir / "c.toml", fs::perms::none);
@@ -612,9 +612,9 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
   const std::string tile = "run-tile {dir}/job --tile 0 -q";
   check("plan", "plan.json truncated", planned_copy([](const fs::path& j) {
     truncate_to(j / "plan.json", fs::file_size(j / "plan.json") / 2);
-  }), tile, "plan.json", "");
+  }), tile, "plan.json", "malformed plan");
   check("plan", "plan.json not JSON", planned_copy([](const fs::path& j) { write_all(j / "plan.json", "\x7f" "ELF"); }),
-        tile, "plan.json", "");
+        tile, "plan.json", "malformed plan");
   check("plan", "plan.json of another version", planned_copy([](const fs::path& j) {
     nlohmann::json p = nlohmann::json::parse(read_all(j / "plan.json"));
     p["version"] = 99;
@@ -628,7 +628,7 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
   check("plan", "tile number past the plan", planned_copy([](const fs::path&) {}),
         "run-tile {dir}/job --tile 7 -q", "job", "tile 7");
   check("plan", "plan.json missing", planned_copy([](const fs::path& j) { fs::remove(j / "plan.json"); }), tile,
-        "plan.json", "");
+        "plan.json", "no plan here");
   check("plan", "plan.json unreadable (mode 000)", planned_copy([](const fs::path& j) {
     fs::permissions(j.parent_path(), fs::perms::all);
     for (const auto& e : fs::recursive_directory_iterator(j)) fs::permissions(e.path(), fs::perms::all);
@@ -707,12 +707,12 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
     fs::remove(j / "job.sqlite-wal");
     fs::remove(j / "job.sqlite-shm");
     write_all(j / "job.sqlite", std::string(8192, 'x'));
-  }), resume, "job.sqlite", "");
+  }), resume, "job.sqlite", "not a database");
   check("journal", "job.sqlite truncated", integrated_copy([](const fs::path& j) {
     fs::remove(j / "job.sqlite-wal");
     fs::remove(j / "job.sqlite-shm");
     truncate_to(j / "job.sqlite", 100);
-  }), resume, "job.sqlite", "");
+  }), resume, "job.sqlite", "malformed");
   check("journal", "job.sqlite of another program", integrated_copy([](const fs::path& j) {
     fs::remove(j / "job.sqlite-wal");
     fs::remove(j / "job.sqlite-shm");
@@ -720,10 +720,10 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
     ASSERT_EQ(test::run_command("python3 -c \"import sqlite3; sqlite3.connect('" + (j / "job.sqlite").string() +
                                 "').execute('create table t(x)')\""),
               0);
-  }), resume, "job.sqlite", "");
+  }), resume, "job.sqlite", "no such table");
   check("journal", "job folder without a journal", integrated_copy([](const fs::path& j) {
     fs::remove(j / "job.sqlite");
-  }), resume, "job", "");
+  }), resume, "job", "not a scalefuse job directory");
   // Damaged values inside an intact database: bad input too (exit 2), not an internal error.
   auto journal_sql = [](const std::string& statement) {
     return [statement](const fs::path& j) {
