@@ -147,7 +147,11 @@ TEST(Faults, FileSizeLimitStopsWithExitThreeAndResumes) {
   // (SQLite's "database or disk is full").
   EXPECT_TRUE(r.log.find("File too large") != std::string::npos || r.log.find("disk is full") != std::string::npos)
       << r.log;
+  EXPECT_EQ(std::count(r.log.begin(), r.log.end(), '\n'), 1) << "one line: " << r.log;
+  EXPECT_NE(r.log.find("continue with: scalefuse resume " + job.string()), std::string::npos) << r.log;
   EXPECT_FALSE(fs::exists(out));
+  for (const auto& e : fs::directory_iterator(root))
+    EXPECT_EQ(e.path().filename().string().find("m.ply.tmp"), std::string::npos) << "a temporary mesh was left: " << e.path();
   const CliRun again = run(bin() + " resume " + job.string() + " -q --threads 2");
   ASSERT_EQ(again.code, 0) << again.log;
   EXPECT_EQ(read_all(out), read_all(root / "ref.ply"));
