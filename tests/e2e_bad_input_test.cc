@@ -554,6 +554,15 @@ TEST(BadInputTable, RangeGrid) {
        }, "s.ply", "1x1"},
       {"scan unreadable (mode 000)", [](const fs::path& in) { fs::permissions(in / "s.ply", fs::perms::none); },
        "s.ply", "Permission denied", true},
+      {"scan negative num_cols", [](const fs::path& in) { edit(in / "s.ply", "num_cols 24", "num_cols -24"); }, "s.ply",
+       "needs positive obj_info num_cols"},
+      {"scan absurd num_cols x num_rows", [](const fs::path& in) {
+         edit(in / "s.ply", "num_cols 24\nobj_info num_rows 20", "num_cols 2000000000\nobj_info num_rows 2000000000");
+       }, "s.ply", "2000000000x2000000000, each must be 1 to 65536"},
+      {"conf unreadable (mode 000)", [](const fs::path& in) { fs::permissions(in / "s.conf", fs::perms::none); },
+       "s.conf", "Permission denied", true},
+      {"conf without scans (empty scene)", [](const fs::path& in) { write_all(in / "s.conf", "camera 0 0 1 0 0 0 1\n"); },
+       "in", "no .conf file with bmesh lines"},
   };
   run_table("range grid", base, cases, "--format rangegrid");
 }

@@ -105,8 +105,11 @@ RangeScan read_range_grid_ply(const fs::path& path) {
   }
   if (!ended) throw input_error(path.string(), "PLY header has no end_header");
   if (!ascii) throw input_error(path.string(), "PLY header has no format line");
-  if (cols <= 0 || rows <= 0 || cols > (1 << 16) || rows > (1 << 16))
+  if (cols < 0 || rows < 0)
     throw input_error(path.string(), "not a range grid: needs positive obj_info num_cols and num_rows");
+  if (cols == 0 || rows == 0 || cols > (1 << 16) || rows > (1 << 16))
+    throw input_error(path.string(), "obj_info num_cols x num_rows is " + std::to_string(cols) + "x" + std::to_string(rows) +
+                                         ", each must be 1 to 65536");
   input_detail::check_depth_size(path, cols, rows);
 
   const std::string_view body = std::string_view(text).substr(std::min(pos, text.size()));
