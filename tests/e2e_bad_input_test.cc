@@ -282,6 +282,11 @@ TEST(BadInputTable, ColmapTextModel) {
        }, "cameras.txt", "duplicate camera id"},
       {"cameras.txt missing", [](const fs::path& in) { fs::remove(in / "sparse/cameras.txt"); }, "cameras.{bin,txt}",
        "without a model"},
+      {"images.txt missing", [](const fs::path& in) { fs::remove(in / "sparse/images.txt"); }, "images.{bin,txt}",
+       "without a model"},
+      {"images.txt unreadable (mode 000)", [](const fs::path& in) {
+         fs::permissions(in / "sparse/images.txt", fs::perms::none);
+       }, "images.txt", "Permission denied", true},
       {"cameras.txt unreadable (mode 000)", [](const fs::path& in) {
          fs::permissions(in / "sparse/cameras.txt", fs::perms::none);
        }, "cameras.txt", "Permission denied", true},
