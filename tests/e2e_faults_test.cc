@@ -78,7 +78,7 @@ TEST(Faults, DiskFullStopsWithExitThreeAndResumesToTheSameMesh) {
     if (e.is_regular_file()) need += e.file_size();
   const std::size_t need_kib = need / 1024 + 1;
 
-  int failed = 0, recovered = 0;
+  int failed = 0, recovered = 0, tile_write_resumed = 0;
   std::set<std::string> where;  // which kind of file the disk filled up in
   // Disks from 1.5 % to 1.7 times what the job holds at its end: it fills up at different points
   // (creating the journal, tiles of integration checkpoints, the extraction's scratch files and
@@ -120,6 +120,7 @@ TEST(Faults, DiskFullStopsWithExitThreeAndResumesToTheSameMesh) {
       if (again.code == 0) {
         ++recovered;
         EXPECT_EQ(read_all(out), read_all(root / "ref.ply"));
+        if (!again_from_scratch && r.log.find("cannot write tile") != std::string::npos) ++tile_write_resumed;
       }
     }
     test::run_command("umount " + disk.string());
@@ -127,6 +128,7 @@ TEST(Faults, DiskFullStopsWithExitThreeAndResumesToTheSameMesh) {
   EXPECT_GE(failed, 5) << "too few sizes ran out of space to show anything";
   EXPECT_EQ(recovered, failed);
   EXPECT_GE(where.size(), 3u) << "the disk should fill up in several kinds of file";
+  EXPECT_GE(tile_write_resumed, 1) << "no size stopped a job (past its first checkpoint) in a tile write";
 }
 
 // A file-size limit (ulimit -f) is the same condition for one file: EFBIG instead of SIGXFSZ.
