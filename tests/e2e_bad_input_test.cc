@@ -768,8 +768,10 @@ TEST(BadInputTable, SkipBadListsWhatItSkipped) {
   fs::copy(scene, without, fs::copy_options::recursive);
   fs::remove(without / "stereo/depth_maps/far_001.png.geometric.bin");
   fs::remove(without / "stereo/depth_maps/far_002.png.geometric.bin");
+  const fs::path far_002 = scene / "stereo/depth_maps/far_002.png.geometric.bin";
+  const std::string far_002_good = read_all(far_002);
   set_colmap_depth(scene, 41, kNaN);
-  truncate_to(scene / "stereo/depth_maps/far_002.png.geometric.bin", 30);
+  truncate_to(far_002, 30);
 
   const CliRun refused = scalefuse("fuse " + scene.string() + " -o " + (root / "a.ply").string() + " -q");
   EXPECT_EQ(refused.code, 2) << refused.log;
@@ -795,9 +797,16 @@ TEST(BadInputTable, SkipBadListsWhatItSkipped) {
   ASSERT_EQ(w.code, 0) << w.log;
   EXPECT_EQ(read_all(root / "b.ply"), read_all(root / "c.ply"));
 
-  // Resumed, the job lists them again (they are read again).
+  // Resumed, the finished job is accepted as it is (same inputs, skipped ones included).
   const CliRun again = scalefuse("resume " + (root / "b.job").string() + " -q");
   EXPECT_EQ(again.code, 0) << again.log;
+  EXPECT_EQ(read_all(root / "b.ply"), read_all(root / "c.ply"));
+  // Repaired, a skipped depth map is a changed input (it was never integrated): resume refuses.
+  write_all(far_002, far_002_good);
+  const CliRun repaired = scalefuse("resume " + (root / "b.job").string() + " -q");
+  EXPECT_EQ(repaired.code, 2) << repaired.log;
+  EXPECT_NE(repaired.log.find("far_002.png.geometric.bin"), std::string::npos) << repaired.log;
+  truncate_to(far_002, 30);
 
   // Every depth map bad: bad input, and the message says they were skipped.
   const fs::path all_bad = root / "all-bad";
