@@ -38,10 +38,16 @@ cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS="$FLA
 cmake --build "$BUILD" -j"${JOBS:-2}"
 cd "$BUILD"
 status=0
-ctest --output-on-failure -j"${JOBS:-2}" -E '^cluster\.mpi$' "$@" || status=$?
+# ctest keeps only the last -E: merge the caller's exclusion with ours (cluster.mpi runs below).
+exclude='^cluster\.mpi$'
+args=()
+while [ $# -gt 0 ]; do
+  if [ "$1" = -E ] && [ $# -ge 2 ]; then exclude="$exclude|$2"; shift 2; else args+=("$1"); shift; fi
+done
+ctest --output-on-failure -j"${JOBS:-2}" -E "$exclude" ${args[@]+"${args[@]}"} || status=$?
 # Open MPI dlcloses its components in MPI_Finalize, so LeakSanitizer sees their lifetime tables
 # with no module name to suppress; the MPI run is checked for memory errors, not leaks.
-if [ $# -eq 0 ]; then
+if [ ${#args[@]} -eq 0 ]; then
   ASAN_OPTIONS="${ASAN_OPTIONS:-}:detect_leaks=0" ctest --output-on-failure -R '^cluster\.mpi$' || status=$?
 fi
 exit $status
