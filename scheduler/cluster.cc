@@ -7,12 +7,11 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "engine/error.h"
+#include "engine/input/file_util.h"
 #include "engine/meshio/atomic_file.h"
 #include "scheduler/job.h"
 
@@ -77,16 +76,13 @@ void write_cluster_plan(const std::filesystem::path& dir, const ClusterPlan& pla
 
 ClusterPlan read_cluster_plan(const std::filesystem::path& dir) {
   const std::filesystem::path path = dir / "plan.json";
-  std::ifstream in(path);
-  if (!in) {
-    const int err = errno;
-    std::error_code ec;
-    if (std::filesystem::exists(path, ec)) throw input_error(path.string(), std::string("cannot read: ") + std::strerror(err));
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec))
     throw input_error(path.string(), "no plan here (make one with: scalefuse plan INPUT --tiles N --job DIR)");
-  }
+  const std::string text = input_detail::read_file_text(path);  // names the file and the reason
   ClusterPlan plan;
   try {
-    const nlohmann::json j = nlohmann::json::parse(in);
+    const nlohmann::json j = nlohmann::json::parse(text);
     if (j.at("version").get<int>() != kPlanVersion)
       throw std::runtime_error("plan version " + j.at("version").dump() + ", this build reads " +
                                std::to_string(kPlanVersion));

@@ -7,7 +7,6 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -19,6 +18,7 @@
 #include <tbb/parallel_for.h>
 
 #include "engine/error.h"
+#include "engine/input/file_util.h"
 #include "engine/parameters.h"
 
 namespace sf {
@@ -197,8 +197,7 @@ std::uint64_t meta_number(sqlite3* db, const std::string& key, const std::string
     return 0;
   }
   std::uint64_t n = 0;
-  const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), n);
-  if (ec != std::errc() || end != v.data() + v.size() || n > max)
+  if (!input_detail::parse_number(std::string_view(v), &n) || n > max)
     throw InputError(journal_file(where) + ": job journal: " + key + " is '" + v + "', not a number" +
                      (max != std::numeric_limits<std::uint64_t>::max() ? " up to " + std::to_string(max) : ""));
   return n;

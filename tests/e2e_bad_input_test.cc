@@ -648,7 +648,7 @@ TEST(BadInputTable, ConfigsPlansTilesJournals) {
     for (const auto& e : fs::recursive_directory_iterator(j)) fs::permissions(e.path(), fs::perms::all);
     fs::permissions(j, fs::perms::all);
     fs::permissions(j / "plan.json", fs::perms::none);
-  }), tile, "plan.json", "cannot read: Permission denied", true);
+  }), tile, "plan.json", "cannot open file: Permission denied", true);
 
   // An integrated job (tiles and journal), copied per case; resume must refuse it.
   const fs::path integrated = root / "integrated";
