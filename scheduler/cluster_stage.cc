@@ -35,7 +35,7 @@ struct TileField {
     if (c.plan.tiles[tile].frames.empty()) return;  // nothing reaches it: no bricks
     const std::filesystem::path dir = tile_job_dir(c.job_dir, tile);
     const Job::Field f = Job::field(dir);
-    store.emplace(dir / "tiles");
+    store.emplace(dir / "tiles", tile_buffer_budget(c.memory_limit));
     map.attach_store(&*store, c.memory_limit);
     map.restore(f.manifest, f.max_generation);
   }

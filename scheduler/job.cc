@@ -318,7 +318,7 @@ Job::Job(JobOptions options, std::string config, std::string input, std::string 
        "CREATE TABLE IF NOT EXISTS extract_blob(box TEXT NOT NULL, dest INTEGER NOT NULL, src INTEGER NOT NULL,"
        "  seq INTEGER NOT NULL, offset INTEGER NOT NULL, stored INTEGER NOT NULL, raw INTEGER NOT NULL);",
        where);
-  store_ = std::make_unique<TileStore>(options_.dir / "tiles");
+  store_ = std::make_unique<TileStore>(options_.dir / "tiles", tile_buffer_budget(options_.memory_limit));
   } catch (...) {
     sqlite3_close(db_);
     ::close(lock_fd_);

@@ -146,6 +146,7 @@ void BrickMap::release(Brick& b) {
 
 void BrickMap::attach_store(const TileStore* store, std::size_t memory_limit) {
   store_ = store;
+  store_buffers_ = store ? store->buffer_bytes() : 0;
   memory_limit_ = memory_limit;
 }
 

@@ -140,8 +140,10 @@ class BrickMap {
   // bricks get the limit minus this, but at least a quarter of the limit.
   void set_reserve(std::size_t bytes) { reserve_ = bytes; }
   std::size_t memory_limit() const { return memory_limit_; }
+  // The store's reusable tile buffers are held outside the bricks too.
   std::size_t brick_budget() const {
-    return std::max(memory_limit_ / 4, memory_limit_ > reserve_ ? memory_limit_ - reserve_ : std::size_t{0});
+    const std::size_t outside = reserve_ + store_buffers_;
+    return std::max(memory_limit_ / 4, memory_limit_ > outside ? memory_limit_ - outside : std::size_t{0});
   }
   // Starts a new access epoch (one per depth map, or per chunk of one).
   void next_epoch() { ++epoch_; }
@@ -191,6 +193,7 @@ class BrickMap {
 
   int brick_level_;
   const TileStore* store_ = nullptr;
+  std::size_t store_buffers_ = 0;  // the store's TileStore::buffer_bytes()
   std::size_t memory_limit_ = 0, reserve_ = 0;
   std::uint64_t epoch_ = 1, next_generation_ = 1;
   // Atomic: bricks are reloaded by integration workers, each holding only its brick's mutex.

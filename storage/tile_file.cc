@@ -19,29 +19,44 @@
 namespace sf {
 namespace {
 
-// A tile's raw and compressed images can be hundreds of MB. Kept in pages mapped for the purpose
-// and unmapped after, they go back to the system at once: through malloc they would raise its
-// mmap threshold and then sit in the heap, where the brick cache's budget does not see them.
+unsigned char* map_pages(std::size_t size) {
+  void* p = ::mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) throw std::bad_alloc();
+  return static_cast<unsigned char*>(p);
+}
+
+// A tile's raw or compressed image (they can be hundreds of MB): pages lent by a TileBuffers, or
+// mapped for the purpose and unmapped after, so that they go back to the system at once (through
+// malloc they would raise its mmap threshold and then sit in the heap, where the brick cache's
+// budget does not see them).
 class PageBuffer {
  public:
-  explicit PageBuffer(std::size_t size) : size_(size) {
+  PageBuffer(std::size_t size, TileBuffers* pool) : size_(size), pool_(pool) {
     if (size_ == 0) return;
-    void* p = ::mmap(nullptr, size_, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (p == MAP_FAILED) throw std::bad_alloc();
-    data_ = static_cast<unsigned char*>(p);
+    if (pool_) {
+      mapping_ = pool_->take(size_);
+    } else {
+      mapping_ = {map_pages(size_), size_};
+    }
   }
   ~PageBuffer() {
-    if (data_) ::munmap(data_, size_);
+    if (!mapping_.data) return;
+    if (pool_) {
+      pool_->give_back(mapping_);
+    } else {
+      ::munmap(mapping_.data, mapping_.capacity);
+    }
   }
   PageBuffer(const PageBuffer&) = delete;
   PageBuffer& operator=(const PageBuffer&) = delete;
-  unsigned char* data() { return data_; }
-  const unsigned char* data() const { return data_; }
+  unsigned char* data() { return mapping_.data; }
+  const unsigned char* data() const { return mapping_.data; }
   std::size_t size() const { return size_; }
 
  private:
   std::size_t size_ = 0;
-  unsigned char* data_ = nullptr;
+  TileBuffers* pool_ = nullptr;
+  TileBuffers::Mapping mapping_;
 };
 
 constexpr char kMagic[8] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
@@ -92,7 +107,58 @@ void write_all(int fd, const unsigned char* data, std::size_t size, const std::f
 
 }  // namespace
 
-std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels, bool durable) {
+TileBuffers::~TileBuffers() {
+  for (const Mapping& m : free_) ::munmap(m.data, m.capacity);
+}
+
+TileBuffers::Mapping TileBuffers::take(std::size_t size) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto it = std::lower_bound(free_.begin(), free_.end(), size,
+                                     [](const Mapping& m, std::size_t s) { return m.capacity < s; });
+    if (it != free_.end()) {
+      const Mapping m = *it;
+      free_.erase(it);
+      retained_ -= m.capacity;
+      return m;
+    }
+  }
+  // Rounded up to 1 MiB, so that tiles of similar sizes can share a mapping.
+  constexpr std::size_t kGrain = std::size_t{1} << 20;
+  const std::size_t capacity = (size + kGrain - 1) / kGrain * kGrain;
+  return {map_pages(capacity), capacity};
+}
+
+void TileBuffers::give_back(Mapping m) {
+  if (m.capacity > max_retained_) {
+    ::munmap(m.data, m.capacity);
+    return;
+  }
+  std::vector<Mapping> drop;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto it = std::lower_bound(free_.begin(), free_.end(), m.capacity,
+                                     [](const Mapping& a, std::size_t s) { return a.capacity < s; });
+    free_.insert(it, m);
+    retained_ += m.capacity;
+    // The largest stay: they are the dearest to fault in again.
+    std::size_t n = 0;
+    while (retained_ > max_retained_) {
+      retained_ -= free_[n].capacity;
+      drop.push_back(free_[n++]);
+    }
+    free_.erase(free_.begin(), free_.begin() + std::ptrdiff_t(n));
+  }
+  for (const Mapping& d : drop) ::munmap(d.data, d.capacity);
+}
+
+std::size_t TileBuffers::retained_bytes() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return retained_;
+}
+
+std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels, bool durable,
+                         TileBuffers* buffers) {
   // Blocks in origin order, so the bytes do not depend on insertion order.
   struct BlockView {
     VoxelKey origin;
@@ -107,7 +173,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   if (raw_size > std::size_t(LZ4_MAX_INPUT_SIZE))
     throw std::length_error(path.string() + ": brick too large for one tile (" + std::to_string(raw_size) +
                             " bytes); use a finer octree.brick_level");
-  PageBuffer raw(raw_size);
+  PageBuffer raw(raw_size, buffers);
   unsigned char* p = raw.data();
   for (const BlockView& b : blocks) {
     put64(p, b.origin.bits);
@@ -121,7 +187,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
       put_float(p + 20, v.colour_weight);
     }
   }
-  PageBuffer stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))));
+  PageBuffer stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))), buffers);
   const int packed = raw_size == 0 ? 0
                                    : LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
                                                           reinterpret_cast<char*>(stored.data() + kHeaderBytes),
@@ -176,7 +242,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   return total;
 }
 
-BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out) {
+BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuffers* buffers) {
   const std::string name = path.string();
   auto bad = [&](const std::string& what) { return input_error(name, "damaged tile: " + what); };
   std::ifstream in(path, std::ios::binary);
@@ -205,11 +271,11 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out) {
   // LZ4 expands at most 255:1; a larger raw size is a lie, not an allocation to make.
   if (raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE) || raw_size > 255 * stored_size + 16)
     throw bad("implausible raw size " + std::to_string(raw_size));
-  PageBuffer stored(stored_size);
+  PageBuffer stored(stored_size, buffers);
   in.read(reinterpret_cast<char*>(stored.data()), std::streamsize(stored_size));
   if (!in) throw bad("cannot read the payload");
   if (get64(h + 48) != fnv1a64(stored.data(), stored.size())) throw bad("payload checksum mismatch");
-  PageBuffer raw(raw_size);
+  PageBuffer raw(raw_size, buffers);
   if (raw_size > 0) {
     const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(stored.data()), reinterpret_cast<char*>(raw.data()),
                                       int(stored_size), int(raw_size));

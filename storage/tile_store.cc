@@ -13,7 +13,8 @@
 
 namespace sf {
 
-TileStore::TileStore(std::filesystem::path dir) : dir_(std::move(dir)) {
+TileStore::TileStore(std::filesystem::path dir, std::size_t buffer_bytes)
+    : dir_(std::move(dir)), buffers_(std::make_unique<TileBuffers>(buffer_bytes)) {
   std::error_code ec;
   std::filesystem::create_directories(dir_, ec);
   if (ec) throw InputError(dir_.string() + ": cannot create the tile folder: " + ec.message());
@@ -25,7 +26,7 @@ std::filesystem::path TileStore::path(BrickCoord c, std::uint64_t generation) co
 }
 
 std::uint64_t TileStore::write(BrickCoord c, std::uint64_t generation, const VoxelTable& voxels) const {
-  return write_tile(path(c, generation), c, voxels, false);
+  return write_tile(path(c, generation), c, voxels, false, buffers_.get());
 }
 
 void TileStore::sync() const {
@@ -41,7 +42,7 @@ void TileStore::read(BrickCoord c, std::uint64_t generation, VoxelTable& voxels)
   const std::filesystem::path p = path(c, generation);
   BrickCoord got;
   try {
-    got = read_tile(p, voxels);
+    got = read_tile(p, voxels, buffers_.get());
   } catch (const InputError& e) {
     throw DamagedTile(e.what(), c, generation);
   }

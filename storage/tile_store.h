@@ -2,13 +2,16 @@
 // The folder of brick tiles of one job. A brick's tile is named by its coordinates and a
 // generation number that only grows, so a tile a checkpoint refers to is never overwritten by a
 // later spill of the same brick: `b_X_Y_Z.G.tile`.
+#include <algorithm>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <set>
 #include <utility>
 
 #include "engine/error.h"
 #include "storage/brick_map.h"
+#include "storage/tile_file.h"
 
 namespace sf {
 
@@ -25,8 +28,11 @@ class DamagedTile : public InputError {
 
 class TileStore {
  public:
-  explicit TileStore(std::filesystem::path dir);  // creates the folder
+  // Creates the folder. The store keeps up to `buffer_bytes` of tile buffers for reuse
+  // (tile_buffer_budget()); they count against the job's memory limit (BrickMap::attach_store).
+  explicit TileStore(std::filesystem::path dir, std::size_t buffer_bytes = 0);
 
+  std::size_t buffer_bytes() const { return buffers_->max_retained(); }
   const std::filesystem::path& dir() const { return dir_; }
   std::filesystem::path path(BrickCoord c, std::uint64_t generation) const;
   // Writes a tile (not yet durable); returns its bytes.
@@ -43,6 +49,13 @@ class TileStore {
 
  private:
   std::filesystem::path dir_;
+  std::unique_ptr<TileBuffers> buffers_;  // a pointer: the store stays movable
 };
+
+// The tile buffers a store keeps for a job with this memory limit: 1/16 of it, 64 MiB at most
+// (enough for the images of a few tiles in flight on each of a few threads).
+inline std::size_t tile_buffer_budget(std::size_t memory_limit) {
+  return std::min(memory_limit / 16, std::size_t{64} << 20);
+}
 
 }  // namespace sf

@@ -149,3 +149,76 @@ TEST(Tile, TruncationWrongMagicAndWrongBrickLevelAreRefused) {
 }
 
 }  // namespace sf
+
+namespace sf {
+
+TEST(TileBuffers, ReusesMappingsAndKeepsNoMoreThanItsBudget) {
+  constexpr std::size_t MiB = std::size_t{1} << 20;
+  TileBuffers pool(3 * MiB);
+  // Sizes round up to whole MiB, so similar tiles share a mapping.
+  TileBuffers::Mapping a = pool.take(100);
+  EXPECT_EQ(a.capacity, MiB);
+  a.data[MiB - 1] = 7;  // the whole capacity is writable
+  pool.give_back(a);
+  EXPECT_EQ(pool.retained_bytes(), MiB);
+  const TileBuffers::Mapping again = pool.take(500000);
+  EXPECT_EQ(again.data, a.data);
+  EXPECT_EQ(pool.retained_bytes(), 0u);
+  const TileBuffers::Mapping two = pool.take(MiB + 1);  // none kept is large enough: a new one
+  EXPECT_EQ(two.capacity, 2 * MiB);
+  const TileBuffers::Mapping third = pool.take(MiB);
+  EXPECT_NE(third.data, again.data);
+  pool.give_back(again);
+  pool.give_back(two);
+  EXPECT_EQ(pool.retained_bytes(), 3 * MiB);
+  // Over the budget, the smallest kept mappings go first: 1 + 1 + 2 MiB -> 1 + 2 MiB.
+  pool.give_back(third);
+  EXPECT_EQ(pool.retained_bytes(), 3 * MiB);
+  EXPECT_EQ(pool.take(2 * MiB).capacity, 2 * MiB);  // the large one was kept
+  // A mapping larger than the whole budget is never kept.
+  pool.give_back(pool.take(4 * MiB));
+  EXPECT_EQ(pool.retained_bytes(), MiB);
+
+  TileBuffers none(0);
+  none.give_back(none.take(10));
+  EXPECT_EQ(none.retained_bytes(), 0u);
+}
+
+TEST(Tile, ReusedBuffersChangeNoByteOfATile) {
+  const auto dir = test::scratch_dir("tile_buffers");
+  // A large, poorly compressible brick, then a small one written and read through buffers the
+  // large one left full of its own bytes.
+  VoxelTable large(3), small(3);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0.01f, 1.f);
+  for (std::uint32_t x = 128; x < 192; ++x)
+    for (std::uint32_t y = 0; y < 64; ++y)
+      for (std::uint32_t z = 128; z < 192; ++z) {
+        VoxelData& v = large.find_or_insert(VoxelKey::make(9, x, y, z));
+        v.distance = u(rng), v.weight = u(rng), v.colour_weight = u(rng);
+      }
+  fill(small, sample_voxels());
+  TileBuffers pool(std::size_t{64} << 20);
+  const std::uint64_t large_bytes = write_tile(dir / "large.tile", {2, 0, 2}, large, false, &pool);
+  EXPECT_GT(large_bytes, std::uint64_t{1} << 20);  // its buffers outgrow the smallest mapping
+  const std::size_t kept = pool.retained_bytes();
+  EXPECT_GE(kept, std::size_t{2} << 20);  // its raw and compressed images, both kept
+  write_tile(dir / "small_pool.tile", {2, 0, 2}, small, false, &pool);
+  write_tile(dir / "small.tile", {2, 0, 2}, small);
+  EXPECT_EQ(bytes_of(dir / "small_pool.tile"), bytes_of(dir / "small.tile"));
+  EXPECT_EQ(pool.retained_bytes(), kept);  // the small tile took no new mapping
+
+  VoxelTable large_back(3), small_back(3);
+  read_tile(dir / "large.tile", large_back, &pool);
+  EXPECT_EQ(large_back.live_count(), large.live_count());
+  read_tile(dir / "small.tile", small_back, &pool);
+  EXPECT_EQ(small_back.live_count(), small.live_count());
+  small.for_each([&](VoxelKey k, const VoxelData& d) {
+    const VoxelData* v = small_back.find(k);
+    ASSERT_NE(v, nullptr);
+    EXPECT_EQ(v->distance, d.distance);
+    EXPECT_EQ(v->weight, d.weight);
+  });
+}
+
+}  // namespace sf
