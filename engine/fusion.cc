@@ -10,6 +10,7 @@
 #include <limits>
 #include <filesystem>
 #include <chrono>
+#include <memory>
 #include <mutex>
 #include <sstream>
 
@@ -212,9 +213,33 @@ int choose_brick_level(const OctreeOptions& o, const IntegrateOptions& integrate
 }
 
 // Where one depth map can write (FrameReach), as integration sees it (clipped to the box).
-FrameReach reach_of(const DepthFrame& f, const FusionOptions& options, const RootCube& root, int brick_level) {
-  return frame_reach(f, triangulate(f, options.triangulate), root, options.integrate, brick_level);
+FrameReach reach_of(const DepthFrame& f, const FusionOptions& options, const RootCube& root, int brick_level,
+                    IntegrateScratch* scratch) {
+  return frame_reach(f, triangulate(f, options.triangulate), root, options.integrate, brick_level, scratch);
 }
+
+// The reach pass's per-depth-map tables, handed from one depth map to the next: allocated afresh,
+// their page faults were half of the plan's time (7-Scenes kitchen, bench/README.md session 18).
+// A pool rather than one per thread, because a thread waiting in a depth map's inner parallel
+// loop may start another depth map.
+class ScratchPool {
+ public:
+  std::unique_ptr<IntegrateScratch> take() {
+    std::lock_guard lock(mutex_);
+    if (free_.empty()) return std::make_unique<IntegrateScratch>();
+    std::unique_ptr<IntegrateScratch> s = std::move(free_.back());
+    free_.pop_back();
+    return s;
+  }
+  void give_back(std::unique_ptr<IntegrateScratch> s) {
+    std::lock_guard lock(mutex_);
+    free_.push_back(std::move(s));
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<IntegrateScratch>> free_;
+};
 
 // The reach of depth maps [0, n) (load(i) gives the i-th as integration sees it), restricted to
 // `region` when given: per depth map its bricks, and the surface cells of all, sorted and unique.
@@ -236,8 +261,11 @@ Reaches gather_reaches(std::size_t n, LoadFrame&& load, const FusionOptions& opt
   out.bricks.resize(n);
   std::size_t cells_unique = 0, planned = 0;
   std::mutex mutex;
+  ScratchPool scratches;
   tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
-    FrameReach r = reach_of(load(i), options, root, brick_level);
+    std::unique_ptr<IntegrateScratch> scratch = scratches.take();
+    FrameReach r = reach_of(load(i), options, root, brick_level, scratch.get());
+    scratches.give_back(std::move(scratch));
     if (region) {  // a cluster tile's run: only its bricks matter
       const auto outside = [&](std::uint64_t id) { return !region->contains(BrickCoord::unpack(id)); };
       r.bricks.erase(std::remove_if(r.bricks.begin(), r.bricks.end(), outside), r.bricks.end());

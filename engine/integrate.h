@@ -96,8 +96,9 @@ struct FrameReach {
   std::vector<std::uint64_t> bricks;  // BrickCoord::packed(), sorted, unique
   std::vector<VoxelKey> cells;        // sorted, unique
 };
+// `scratch` as for integrate_frame (the planning pass reads every depth map).
 FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles, const RootCube& root,
-                       const IntegrateOptions& options, int brick_level);
+                       const IntegrateOptions& options, int brick_level, IntegrateScratch* scratch = nullptr);
 
 // The contributions one triangle makes at one level (exposed for tests). `level_of_triangle` is
 // the level of equation 1, used to bound coarser-level ramps.

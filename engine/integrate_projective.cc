@@ -637,7 +637,7 @@ void sort_unique(std::vector<T>& v) {
 }  // namespace
 
 FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles, const RootCube& root,
-                       const IntegrateOptions& options, int brick_level) {
+                       const IntegrateOptions& options, int brick_level, IntegrateScratch* scratch) {
   FrameReach reach;
   auto add_bricks = [&](BrickCoord lo, BrickCoord hi) {  // inclusive
     for (std::uint32_t z = lo.z; z <= hi.z; ++z)
@@ -645,7 +645,8 @@ FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>
         for (std::uint32_t x = lo.x; x <= hi.x; ++x) reach.bricks.push_back(BrickCoord{x, y, z}.packed());
   };
   const double bs = root.cell_size(brick_level);
-  Prepared p;
+  Prepared local;
+  Prepared& p = scratch ? scratch->tables->prepared : local;
   if (prepare(frame, triangles, root, options, nullptr, &p)) {
     // The bricks of every item's candidate box: integration evaluates no voxel outside them.
     for (int tile = 0; tile < p.TX * p.TY; ++tile)

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Integration of two binaries compared on one input, runs alternating (A B A B ...), so that the
+# ratios hold on a noisy machine. Each run is a fresh `fuse --integrate-only` job; per binary it
+# prints the medians of wall time, the bounds / plan / integrate stages (from --stats), minor page
+# faults and peak RSS, and whether the two binaries' tiles are byte-identical (sha256 of all).
+# Usage: bench/integrate_ab.sh INPUT CONFIG RUNS BIN_A BIN_B [fuse args...]
+#   e.g. bench/integrate_ab.sh ../shared/data/7scenes_50frames configs/rgbd.toml 3 old/scalefuse build/bin/scalefuse --memory-limit 1.5G
+set -euo pipefail
+[ $# -ge 5 ] || { sed -n 2,7p "$0" >&2; exit 2; }
+INPUT=$1 CONFIG=$2 RUNS=$3 A=$4 B=$5
+shift 5
+WORK=$(mktemp -d /tmp/scalefuse-ab.XXXXXX)
+trap 'rm -rf "$WORK"' EXIT
+for i in $(seq "$RUNS"); do
+  for side in A B; do
+    bin=$A
+    [ $side = B ] && bin=$B
+    rm -rf "$WORK/job"
+    /usr/bin/time -f "%e %R %M" -o "$WORK/time" "$bin" fuse "$INPUT" --config "$CONFIG" -o "$WORK/m.ply" \
+      --job "$WORK/job" --integrate-only --stats "$WORK/stats.json" -q "$@" > /dev/null
+    tiles=$(cd "$WORK/job/tiles" && sha256sum -- * | sha256sum | cut -c1-16)
+    python3 - "$WORK" "$side" "$tiles" >> "$WORK/runs" <<'PY'
+import json, sys
+work, side, tiles = sys.argv[1:4]
+wall, faults, rss = open(f"{work}/time").read().split()[-3:]
+s = json.load(open(f"{work}/stats.json"))["seconds"]
+print(side, wall, s.get("bounds", 0), s.get("plan", 0), s["integrate"], faults, rss, tiles)
+PY
+  done
+done
+python3 - "$WORK/runs" "$A" "$B" <<'PY'
+import statistics, sys
+rows = [l.split() for l in open(sys.argv[1])]
+names = {"A": sys.argv[2], "B": sys.argv[3]}
+med = {}
+for side in "AB":
+    r = [x for x in rows if x[0] == side]
+    m = [statistics.median(float(x[k]) for x in r) for k in range(1, 7)]
+    med[side] = m
+    print(f"{side} ({names[side]}), median of {len(r)}: wall {m[0]:.2f} s, bounds {m[1]:.2f} s, plan {m[2]:.2f} s, "
+          f"integrate {m[3]:.2f} s, {m[4]:.0f} minor faults, peak RSS {m[5] / 1024:.0f} MiB")
+print("B / A: wall {:.2f}, plan {:.2f}, integrate {:.2f}".format(
+    *(med["B"][k] / med["A"][k] if med["A"][k] else float("nan") for k in (0, 2, 3))))
+hashes = {x[7] for x in rows}
+print("tiles byte-identical across all runs" if len(hashes) == 1 else f"tiles DIFFER: {sorted(hashes)}")
+PY
