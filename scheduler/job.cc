@@ -182,9 +182,8 @@ std::vector<BrickBox> parse_tiles(const std::string& text, const std::string& wh
 
 // The journal's file for a message, given the job folder or the file itself.
 std::string journal_file(const std::string& where) {
-  const std::string name = "job.sqlite";
-  const bool is_file = where.size() >= name.size() && where.compare(where.size() - name.size(), name.size(), name) == 0;
-  return is_file ? where : (std::filesystem::path(where) / name).string();
+  const std::filesystem::path p(where);
+  return p.filename() == "job.sqlite" ? where : (p / "job.sqlite").string();
 }
 
 // A number the journal keeps as text. A damaged value is a fault of the job folder (bad input,

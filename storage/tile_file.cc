@@ -25,27 +25,17 @@ unsigned char* map_pages(std::size_t size) {
   return static_cast<unsigned char*>(p);
 }
 
-// A tile's raw or compressed image (they can be hundreds of MB): pages lent by a TileBuffers, or
-// mapped for the purpose and unmapped after, so that they go back to the system at once (through
-// malloc they would raise its mmap threshold and then sit in the heap, where the brick cache's
-// budget does not see them).
+// A tile's raw or compressed image (they can be hundreds of MB), in pages lent by a TileBuffers:
+// mapped pages rather than malloc's, so that what the pool does not keep goes back to the system
+// at once (through malloc it would raise the mmap threshold and then sit in the heap, where the
+// brick cache's budget does not see it).
 class PageBuffer {
  public:
-  PageBuffer(std::size_t size, TileBuffers* pool) : size_(size), pool_(pool) {
-    if (size_ == 0) return;
-    if (pool_) {
-      mapping_ = pool_->take(size_);
-    } else {
-      mapping_ = {map_pages(size_), size_};
-    }
+  PageBuffer(std::size_t size, TileBuffers& pool) : size_(size), pool_(pool) {
+    if (size_ > 0) mapping_ = pool_.take(size_);
   }
   ~PageBuffer() {
-    if (!mapping_.data) return;
-    if (pool_) {
-      pool_->give_back(mapping_);
-    } else {
-      ::munmap(mapping_.data, mapping_.capacity);
-    }
+    if (mapping_.data) pool_.give_back(mapping_);
   }
   PageBuffer(const PageBuffer&) = delete;
   PageBuffer& operator=(const PageBuffer&) = delete;
@@ -55,9 +45,11 @@ class PageBuffer {
 
  private:
   std::size_t size_ = 0;
-  TileBuffers* pool_ = nullptr;
+  TileBuffers& pool_;
   TileBuffers::Mapping mapping_;
 };
+
+bool smaller(const TileBuffers::Mapping& m, std::size_t capacity) { return m.capacity < capacity; }
 
 constexpr char kMagic[8] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
 constexpr std::size_t kHeaderBytes = 64;  // 56 bytes of fields + their checksum
@@ -114,8 +106,7 @@ TileBuffers::~TileBuffers() {
 TileBuffers::Mapping TileBuffers::take(std::size_t size) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    const auto it = std::lower_bound(free_.begin(), free_.end(), size,
-                                     [](const Mapping& m, std::size_t s) { return m.capacity < s; });
+    const auto it = std::lower_bound(free_.begin(), free_.end(), size, smaller);
     if (it != free_.end()) {
       const Mapping m = *it;
       free_.erase(it);
@@ -137,8 +128,7 @@ void TileBuffers::give_back(Mapping m) {
   std::vector<Mapping> drop;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    const auto it = std::lower_bound(free_.begin(), free_.end(), m.capacity,
-                                     [](const Mapping& a, std::size_t s) { return a.capacity < s; });
+    const auto it = std::lower_bound(free_.begin(), free_.end(), m.capacity, smaller);
     free_.insert(it, m);
     retained_ += m.capacity;
     // The largest stay: they are the dearest to fault in again.
@@ -159,6 +149,8 @@ std::size_t TileBuffers::retained_bytes() const {
 
 std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels, bool durable,
                          TileBuffers* buffers) {
+  TileBuffers unpooled(0);  // keeps nothing: pages mapped for this tile alone
+  TileBuffers& pool = buffers ? *buffers : unpooled;
   // Blocks in origin order, so the bytes do not depend on insertion order.
   struct BlockView {
     VoxelKey origin;
@@ -173,7 +165,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   if (raw_size > std::size_t(LZ4_MAX_INPUT_SIZE))
     throw std::length_error(path.string() + ": brick too large for one tile (" + std::to_string(raw_size) +
                             " bytes); use a finer octree.brick_level");
-  PageBuffer raw(raw_size, buffers);
+  PageBuffer raw(raw_size, pool);
   unsigned char* p = raw.data();
   for (const BlockView& b : blocks) {
     put64(p, b.origin.bits);
@@ -187,7 +179,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
       put_float(p + 20, v.colour_weight);
     }
   }
-  PageBuffer stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))), buffers);
+  PageBuffer stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))), pool);
   const int packed = raw_size == 0 ? 0
                                    : LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
                                                           reinterpret_cast<char*>(stored.data() + kHeaderBytes),
@@ -243,6 +235,8 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
 }
 
 BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuffers* buffers) {
+  TileBuffers unpooled(0);
+  TileBuffers& pool = buffers ? *buffers : unpooled;
   const std::string name = path.string();
   auto bad = [&](const std::string& what) { return input_error(name, "damaged tile: " + what); };
   std::ifstream in(path, std::ios::binary);
@@ -271,11 +265,11 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
   // LZ4 expands at most 255:1; a larger raw size is a lie, not an allocation to make.
   if (raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE) || raw_size > 255 * stored_size + 16)
     throw bad("implausible raw size " + std::to_string(raw_size));
-  PageBuffer stored(stored_size, buffers);
+  PageBuffer stored(stored_size, pool);
   in.read(reinterpret_cast<char*>(stored.data()), std::streamsize(stored_size));
   if (!in) throw bad("cannot read the payload");
   if (get64(h + 48) != fnv1a64(stored.data(), stored.size())) throw bad("payload checksum mismatch");
-  PageBuffer raw(raw_size, buffers);
+  PageBuffer raw(raw_size, pool);
   if (raw_size > 0) {
     const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(stored.data()), reinterpret_cast<char*>(raw.data()),
                                       int(stored_size), int(raw_size));
