@@ -9,8 +9,10 @@
 #include "cli/commands.h"
 #include "engine/error.h"
 #include "engine/vdb_export.h"
+#include "scheduler/huge_pages.h"
 
 int main(int argc, char** argv) {
+  sf::reexec_with_huge_pages(argv);  // returns unless it re-executes (scheduler/huge_pages.h)
   CLI::App app{"scalefuse: fusion of depth maps with multiple scales (Fuhrmann & Goesele 2011)"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "scalefuse 0.1.0");

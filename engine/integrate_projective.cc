@@ -520,6 +520,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           cp[k] = {hs.m.dot(root.min) - hs.k, hs.m[bx] * h, hs.m[cx] * h, hs.m[ax], hs.m[ax] != 0 ? 1.0 / hs.m[ax] : 0.0};
         }
         const RowPrefilter prefilter(cp, double(a0 - 1) * h, double(a1 + 1) * h, 1e-6 * h);
+        const GridTriangle* last_owner = nullptr;
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
           std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
           if (!prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
@@ -556,9 +557,11 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               const Vector2d q = pixel_of(sensor, xs);
               const int col = fast_floor(q.x() - 0.5), row = fast_floor(q.y() - 0.5);
               if (!(col >= c0 && col < c1 && row >= r0 && row < r1)) continue;  // another tile's voxel
-              // The owner: one of the quad's triangles (the likelier first), or, on the quad's left
-              // or top border, one of the neighbouring quads' (edge functions give a shared edge to
-              // one side only).
+              // The owner: the previous candidate's, which owns most lines of sight of a column and
+              // of its neighbours (ownership is exclusive, so if it owns this one no other triangle
+              // does); else one of the quad's triangles (the likelier first), or, on the quad's
+              // left or top border, one of the neighbouring quads' (edge functions give a shared
+              // edge to one side only).
               const GridTriangle* owner = nullptr;
               double E[3] = {0, 0, 0};
               auto try_triangle = [&](std::int32_t t) {
@@ -574,13 +577,18 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
                 const int first = first_guess ? 0 : 1;
                 return try_triangle(qd.tri[first]) || try_triangle(qd.tri[1 - first]);
               };
-              const Quad& here = quad[std::size_t(row) * QW + col];
-              const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
-              if (!try_quad(row, col, guess)) {
-                const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
-                if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
-                      (left && top && try_quad(row - 1, col - 1, true))))
-                  continue;
+              if (last_owner && last_owner->own.owns(q, E)) {
+                owner = last_owner;
+              } else {
+                const Quad& here = quad[std::size_t(row) * QW + col];
+                const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
+                if (!try_quad(row, col, guess)) {
+                  const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
+                  if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
+                        (left && top && try_quad(row - 1, col - 1, true))))
+                    continue;
+                }
+                last_owner = owner;
               }
               if (level < owner->coarsest || level > owner->level) continue;
               const double ramp = ramp_of[owner->level];

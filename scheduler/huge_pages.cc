@@ -1,0 +1,61 @@
+#include "scheduler/huge_pages.h"
+
+#include <gnu/libc-version.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+namespace sf {
+
+namespace {
+
+constexpr std::string_view kTunable = "glibc.malloc.hugetlb";
+
+// "2.36" -> true for 2.35 and later.
+bool has_hugetlb_tunable(std::string_view version) {
+  unsigned major = 0, minor = 0;
+  const std::string v(version);
+  if (std::sscanf(v.c_str(), "%u.%u", &major, &minor) != 2) return false;
+  return major > 2 || (major == 2 && minor >= 35);
+}
+
+}  // namespace
+
+std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
+                                              std::string_view libc_version) {
+  if (transparent_hugepage.find("[madvise]") == std::string_view::npos) return std::nullopt;
+  if (!has_hugetlb_tunable(libc_version)) return std::nullopt;
+  const std::string_view current = tunables ? tunables : "";
+  if (current.find(kTunable) != std::string_view::npos) return std::nullopt;
+  std::string value(current);
+  if (!value.empty()) value += ':';
+  value += kTunable;
+  value += "=1";
+  return value;
+}
+
+void reexec_with_huge_pages(char** argv) {
+  const char* opt_out = std::getenv("SCALEFUSE_HUGE_PAGES");
+  if (opt_out && std::strcmp(opt_out, "0") == 0) return;
+  std::ifstream in("/sys/kernel/mm/transparent_hugepage/enabled");
+  if (!in) return;
+  std::stringstream mode;
+  mode << in.rdbuf();
+  const char* before = std::getenv("GLIBC_TUNABLES");
+  const std::optional<std::string> value = huge_page_tunables(before, mode.str(), gnu_get_libc_version());
+  if (!value) return;
+  const std::string saved = before ? before : "";
+  if (setenv("GLIBC_TUNABLES", value->c_str(), 1) != 0) return;
+  execv("/proc/self/exe", argv);
+  // Still here: the exec failed; carry on as started.
+  if (before)
+    setenv("GLIBC_TUNABLES", saved.c_str(), 1);
+  else
+    unsetenv("GLIBC_TUNABLES");
+}
+
+}  // namespace sf

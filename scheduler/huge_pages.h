@@ -1,0 +1,28 @@
+#pragma once
+// Transparent huge pages for the heap. On this project's machines a first touch of a fresh 4 KiB
+// page costs ~10 µs (a virtual machine's page fault), and a fusion job touches its voxel blocks,
+// tile images and per-depth-map tables afresh many times over: a third of an integration's time
+// went to page faults (bench/README.md, session 19). glibc's malloc asks the kernel for 2 MiB pages
+// when started with GLIBC_TUNABLES=glibc.malloc.hugetlb=1, a setting read only at start-up, so the
+// command-line program re-executes itself once with it. Allocation only: results do not change.
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace sf {
+
+// The GLIBC_TUNABLES value to re-execute with, or nullopt if that would change nothing:
+// `transparent_hugepage` is the kernel's /sys/kernel/mm/transparent_hugepage/enabled ("always
+// [madvise] never": only the madvise mode needs glibc to ask; "always" gives huge pages unasked,
+// "never" not at all), `libc_version` glibc's (the tunable exists from 2.35), `tunables` the
+// current GLIBC_TUNABLES (null if unset; one that already sets glibc.malloc.hugetlb is the user's
+// choice, or this process's own re-execution, and is kept).
+std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
+                                              std::string_view libc_version);
+
+// Re-executes the running program (/proc/self/exe, same arguments and environment) with the
+// tunables of huge_page_tunables(), unless SCALEFUSE_HUGE_PAGES=0. Returns if it does not (not
+// applicable, disabled, or the exec failed: the run then goes on with 4 KiB pages).
+void reexec_with_huge_pages(char** argv);
+
+}  // namespace sf
