@@ -17,6 +17,7 @@
 #include "engine/depth_frame.h"
 #include "engine/integrate.h"
 #include "engine/triangulate.h"
+#include "scheduler/huge_pages.h"
 #include "storage/brick_map.h"
 
 using namespace sf;
@@ -50,6 +51,7 @@ static DepthFrame sphere_view(double angle) {
 }
 
 int main(int argc, char** argv) {
+  sf::reexec_with_huge_pages(argv);  // measure with the heap the command-line program has
   const int frames = argc > 1 ? std::atoi(argv[1]) : 8;
   IntegrateOptions opt;
   if (argc > 2) opt.gamma = std::atof(argv[2]);

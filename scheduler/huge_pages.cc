@@ -3,11 +3,10 @@
 #include <gnu/libc-version.h>
 #include <unistd.h>
 
-#include <cstdio>
+#include <charconv>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <sstream>
 
 namespace sf {
 
@@ -18,8 +17,10 @@ constexpr std::string_view kTunable = "glibc.malloc.hugetlb";
 // "2.36" -> true for 2.35 and later.
 bool has_hugetlb_tunable(std::string_view version) {
   unsigned major = 0, minor = 0;
-  const std::string v(version);
-  if (std::sscanf(v.c_str(), "%u.%u", &major, &minor) != 2) return false;
+  const char* const end = version.data() + version.size();
+  const auto [dot, e1] = std::from_chars(version.data(), end, major);
+  if (e1 != std::errc{} || dot == end || *dot != '.') return false;
+  if (std::from_chars(dot + 1, end, minor).ec != std::errc{}) return false;
   return major > 2 || (major == 2 && minor >= 35);
 }
 
@@ -42,11 +43,10 @@ void reexec_with_huge_pages(char** argv) {
   const char* opt_out = std::getenv("SCALEFUSE_HUGE_PAGES");
   if (opt_out && std::strcmp(opt_out, "0") == 0) return;
   std::ifstream in("/sys/kernel/mm/transparent_hugepage/enabled");
-  if (!in) return;
-  std::stringstream mode;
-  mode << in.rdbuf();
+  std::string mode;  // one line
+  if (!std::getline(in, mode)) return;
   const char* before = std::getenv("GLIBC_TUNABLES");
-  const std::optional<std::string> value = huge_page_tunables(before, mode.str(), gnu_get_libc_version());
+  const std::optional<std::string> value = huge_page_tunables(before, mode, gnu_get_libc_version());
   if (!value) return;
   const std::string saved = before ? before : "";
   if (setenv("GLIBC_TUNABLES", value->c_str(), 1) != 0) return;

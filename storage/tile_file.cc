@@ -25,18 +25,15 @@ namespace {
 // measured, and these images are touched from end to end (scheduler/huge_pages.h).
 unsigned char* map_pages(std::size_t size) {
   constexpr std::size_t kHuge = std::size_t{2} << 20;
-  if (size < kHuge) {
-    void* p = ::mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (p == MAP_FAILED) throw std::bad_alloc();
-    return static_cast<unsigned char*>(p);
-  }
-  // Map a huge page more and unmap the unaligned ends.
-  void* p = ::mmap(nullptr, size + kHuge, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  const bool huge = size >= kHuge;
+  // For huge pages, a huge page more, whose unaligned ends are unmapped below.
+  const std::size_t mapped = huge ? size + kHuge : size;
+  void* p = ::mmap(nullptr, mapped, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
   if (p == MAP_FAILED) throw std::bad_alloc();
+  if (!huge) return static_cast<unsigned char*>(p);
   const auto start = reinterpret_cast<std::uintptr_t>(p);
-  const std::uintptr_t aligned = (start + kHuge - 1) & ~std::uintptr_t(kHuge - 1);
+  const std::uintptr_t aligned = (start + kHuge - 1) & ~std::uintptr_t(kHuge - 1), end = start + mapped;
   if (aligned > start) ::munmap(p, aligned - start);
-  const std::uintptr_t end = start + size + kHuge;
   if (end > aligned + size) ::munmap(reinterpret_cast<void*>(aligned + size), end - (aligned + size));
   auto* data = reinterpret_cast<unsigned char*>(aligned);
   ::madvise(data, size, MADV_HUGEPAGE);  // a hint; 4 KiB pages where it is refused
