@@ -69,6 +69,8 @@ void register_parameters(ParameterSet& s, FusionOptions& o) {
   s.add("extract.mode", &o.extract.mode, "",
         "global: one Delaunay tetrahedralization | bricks: per brick window (same mesh) | auto: bricks if global "
         "would exceed the memory limit");
+  s.add("extract.window_group_voxels", &o.extract.window_group_voxels, "voxels",
+        "brick by brick: windows cover octree cells of bricks with at most this many voxels; 0 = one brick");
   s.add("extract.parallel_min_voxels", &o.extract.parallel_min_voxels, "voxels",
         "use CGAL's parallel Delaunay insertion from this many voxels (with > 1 thread)");
   s.add("octree.bbox", &o.octree.bbox, "m", "clip box xmin,ymin,zmin,xmax,ymax,zmax; empty = data bounds");
@@ -109,7 +111,8 @@ std::string extraction_signature(const FusionOptions& o, int brick_level) {
   std::ostringstream s;
   s << std::hexfloat << "tau0 " << o.regularize.tau0 << " tau1 " << o.regularize.tau1 << " n "
     << o.extract.neighbourhood_n << " snap " << o.extract.snap_fraction << " components "
-    << o.extract.min_component_triangles << " bricks " << brick_level;
+    << o.extract.min_component_triangles << " bricks " << brick_level << " window groups "
+    << o.extract.window_group_voxels;
   return s.str();
 }
 

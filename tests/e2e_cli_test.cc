@@ -134,7 +134,7 @@ TEST(CliValidScene, ExtractionByBricksGivesTheGlobalMeshOnTheRealBunny) {
   EXPECT_TRUE(ga == gb) << "the per-brick mesh differs from the global one";
   const auto j = nlohmann::json::parse(std::ifstream(stats));
   EXPECT_EQ(j["extract"]["mode"], "bricks");
-  EXPECT_GT(j["extract"]["windows"].get<int>(), 100);
+  EXPECT_GT(j["extract"]["windows"].get<int>(), 20);  // window groups of several bricks
   EXPECT_GT(j["extract"]["window_cells_rejected"].get<int>(), 0);
   EXPECT_FALSE(fs::exists(fs::path(bricks.string() + ".job") / "scratch")) << "scratch files are removed";
   // Bricks 4x smaller (level 5, 6 mm): paging, regularization and extraction all cut differently.

@@ -154,7 +154,8 @@ TEST(Job, KilledDuringBrickExtractionResumesBrickByBrick) {
   const fs::path ref = dir / "ref.ply";
   ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
   const std::string expected = bytes_of(ref);
-  const std::string commit_each = " --extract bricks --checkpoint-seconds 0.000001 ";
+  // One brick per window group: one commit per brick in every pass.
+  const std::string commit_each = " --extract bricks --checkpoint-seconds 0.000001 --set extract.window_group_voxels=0 ";
   for (int kill_after : {60, 380, 1000}) {
     SCOPED_TRACE("killed after commit " + std::to_string(kill_after));
     const fs::path out = dir / numbered("x", kill_after, ".ply");
@@ -181,6 +182,27 @@ TEST(Job, KilledDuringBrickExtractionResumesBrickByBrick) {
     if (kill_after > 200) {
       EXPECT_EQ(stats["regularize"]["blended"], 0) << "regularization was complete: not run again";
     }
+  }
+  // Window groups of several bricks (149 bricks in 103 windows): killed after the 30th group of
+  // the windows' pass, whose commits hold the posts of every brick of their groups.
+  {
+    const fs::path out = dir / "groups.ply", job = dir / "groups.job";
+    const std::string groups = " --extract bricks --checkpoint-seconds 0.000001 --set extract.window_group_voxels=20000 ";
+    ASSERT_NE(scalefuse("fuse " + bunny().string() + " -o " + out.string() + " --job " + job.string() + " -q" + groups +
+                            kScene,
+                        "SCALEFUSE_TEST_KILL_IN_EXTRACTION=330")
+                  .code,
+              0);
+    const auto st = json_of(scalefuse("status " + job.string() + " --json").output);
+    ASSERT_FALSE(st["extraction"].empty());
+    EXPECT_EQ(st["extraction"].back()["pass"], "tetrahedralize");
+    EXPECT_EQ(st["extraction"].back()["complete"], false);
+    const CliRun resumed = scalefuse("resume " + job.string() + " -q --stats " + out.string() + ".json");
+    ASSERT_EQ(resumed.code, 0) << resumed.output;
+    EXPECT_TRUE(bytes_of(out) == expected);
+    const auto stats = nlohmann::json::parse(bytes_of(out.string() + ".json"));
+    EXPECT_GE(stats["extract"]["resumed_items"].get<int>(), 20);
+    EXPECT_EQ(stats["extract"]["windows"].get<int>(), 103);
   }
   // Killed in the windows' pass, then fused again with another snapping distance: the record
   // belongs to other parameters and is dropped, the result is the new parameters' mesh.
@@ -229,7 +251,7 @@ TEST(Job, SigtermDuringExtractionCommitsExitsAndResumes) {
   const fs::path ref = dir / "ref.ply";
   ASSERT_EQ(scalefuse("fuse " + bunny().string() + " -o " + ref.string() + " -q " + kScene).code, 0);
   const std::string expected = bytes_of(ref);
-  const std::string commit_each = " --extract bricks --checkpoint-seconds 0.000001 ";
+  const std::string commit_each = " --extract bricks --checkpoint-seconds 0.000001 --set extract.window_group_voxels=0 ";
   for (int term_after : {60, 380, 1000, kExtractionCommits}) {
     SCOPED_TRACE("SIGTERM after commit " + std::to_string(term_after));
     const fs::path out_dir = dir / numbered("t", term_after, "");

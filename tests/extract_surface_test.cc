@@ -393,18 +393,31 @@ TEST(ExtractSurface, BrickByBrickGivesTheGlobalMesh) {
     ASSERT_GT(reference.faces.size(), 1000u);
     for (int brick_level : {0, 2, 3, 5}) {  // 5: bricks of 2 finest cells, far smaller than a ramp
       if (n == 2 && brick_level == 5) continue;  // 350 points per voxel: slow, and n = 0 covers it
-      SCOPED_TRACE("n " + std::to_string(n) + ", brick level " + std::to_string(brick_level));
-      ExtractOptions by_brick = o;
-      by_brick.brick_level = brick_level;
-      ExtractStats st;
-      Mesh m;
-      tbb::task_arena arena(2);
-      arena.execute([&] { m = extract_surface(voxels, root, by_brick, nullptr, &st); });
-      EXPECT_TRUE(same_mesh(m, reference));
-      EXPECT_EQ(st.snapped_voxels, global_stats.snapped_voxels);
-      EXPECT_GE(st.window_points + st.window_voxels_in_cubes, st.voxels);
-      EXPECT_GT(st.window_voxels_in_cubes, st.voxels / 10);  // the empty cubes' cells were used
-      EXPECT_EQ(st.windows == 1, brick_level == 0);
+      // Window groups of one brick, of a few bricks, and the default (here: all bricks at once).
+      std::size_t points_one_brick = 0;
+      for (std::size_t group : {std::size_t{0}, std::size_t{3000}, ExtractOptions{}.window_group_voxels}) {
+        SCOPED_TRACE("n " + std::to_string(n) + ", brick level " + std::to_string(brick_level) + ", groups of " +
+                     std::to_string(group) + " voxels");
+        ExtractOptions by_brick = o;
+        by_brick.brick_level = brick_level;
+        by_brick.window_group_voxels = group;
+        ExtractStats st;
+        Mesh m;
+        tbb::task_arena arena(2);
+        arena.execute([&] { m = extract_surface(voxels, root, by_brick, nullptr, &st); });
+        EXPECT_TRUE(same_mesh(m, reference));
+        EXPECT_EQ(st.snapped_voxels, global_stats.snapped_voxels);
+        EXPECT_GE(st.window_points + st.window_voxels_in_cubes, st.voxels);
+        EXPECT_GT(st.window_voxels_in_cubes, st.voxels / 10);  // the empty cubes' cells were used
+        if (group == 0) {
+          EXPECT_EQ(st.windows == 1, brick_level == 0);
+          points_one_brick = st.window_points + st.window_voxels_in_cubes;
+        } else if (brick_level >= 2) {
+          // Bricks grouped: less halo (and fewer duplicate levels) to triangulate.
+          EXPECT_LT(st.window_points + st.window_voxels_in_cubes, points_one_brick);
+        }
+        if (group == ExtractOptions{}.window_group_voxels) EXPECT_EQ(st.window_points + st.window_voxels_in_cubes, st.voxels);
+      }
     }
   }
 }
@@ -461,6 +474,7 @@ TEST(ExtractSurface, BrickByBrickHandlesExactZerosAndComponentRemoval) {
                      std::to_string(brick_level));
         ExtractOptions by_brick = o;
         by_brick.brick_level = brick_level;
+        by_brick.window_group_voxels = brick_level == 2 ? 0 : 2000;
         ExtractStats st;
         const Mesh m = extract_surface(voxels, root, by_brick, nullptr, &st);
         EXPECT_TRUE(same_mesh(m, reference));
@@ -484,6 +498,7 @@ TEST(ExtractSurface, BrickByBrickHandlesExactZerosAndComponentRemoval) {
     SCOPED_TRACE("blobs, brick level " + std::to_string(brick_level));
     ExtractOptions by_brick = o;
     by_brick.brick_level = brick_level;
+    by_brick.window_group_voxels = brick_level == 1 ? 0 : 2000;
     ExtractStats st;
     const Mesh m = extract_surface(blobs, root, by_brick, nullptr, &st);
     EXPECT_TRUE(same_mesh(m, reference));

@@ -117,6 +117,7 @@ std::uint32_t compact_bits(std::uint64_t v) {
 struct BrickInfo {
   std::uint64_t code;  // Morton code of the brick coordinates = its place in the output
   std::uint32_t x, y, z;
+  std::uint64_t voxels;
 };
 
 // Each pass and the mailboxes it posts to (read by later passes only).
@@ -187,6 +188,9 @@ struct BrickExtraction::Impl {
     std::mutex mutex;
     std::vector<std::uint64_t> finished;
     std::chrono::steady_clock::time_point last = std::chrono::steady_clock::now();
+    // The bricks whose posts an item makes (the journal commits their blobs with it); unset:
+    // the item is a brick and posts as itself.
+    std::function<void(std::uint64_t item, std::vector<std::uint64_t>& srcs)> sources;
   };
   Pass adding{"regularize", outputs_of("regularize")};
   // A cluster tile's stage (ExtractShare): the passes before it are every tile's, read through
@@ -229,6 +233,7 @@ struct BrickExtraction::Impl {
   }
   std::shared_ptr<const BrickVoxels> load(std::uint64_t code);
   void prepare(const ProgressFn& progress, ExtractStats* st);
+  std::vector<std::vector<std::uint32_t>> window_groups() const;
 
   Mailbox& box(const std::string& name);
   void forget(const std::vector<std::string>& names);
@@ -320,9 +325,16 @@ void BrickExtraction::Impl::commit(Pass& p, bool whole) {
     return;
   }
   std::sort(p.finished.begin(), p.finished.end());
+  std::vector<std::uint64_t> srcs;
+  if (p.sources) {
+    for (std::uint64_t item : p.finished) p.sources(item, srcs);
+    std::sort(srcs.begin(), srcs.end());
+  } else {
+    srcs = p.finished;
+  }
   std::vector<ExtractJournal::Record> records;
   for (const std::string& name : p.outputs)
-    for (const Mailbox::Blob& b : box(name).sync_blobs_from(p.finished)) records.push_back({name, b});
+    for (const Mailbox::Blob& b : box(name).sync_blobs_from(srcs)) records.push_back({name, b});
   if (whole) p.finished.push_back(ExtractJournal::kWholePass);
   journal->commit(p.name, p.finished, records);
   p.finished.clear();
@@ -541,6 +553,39 @@ std::shared_ptr<const BrickVoxels> BrickExtraction::Impl::load(std::uint64_t cod
   return b;
 }
 
+// Pass 1's items: octree cells of bricks, coarse to fine, each split into its eight children
+// while it holds more than options.window_group_voxels voxels or, in a cluster tile's stage, another
+// tile's bricks too. A group is the ascending indices (into `bricks`) of its bricks; never empty.
+std::vector<std::vector<std::uint32_t>> BrickExtraction::Impl::window_groups() const {
+  std::vector<std::vector<std::uint32_t>> groups;
+  const auto mine = [&](std::size_t i) { return !share || share->owns(bricks[i].code); };
+  // bricks[a, b) are those of one cell of level g.
+  const auto visit = [&](const auto& self, std::size_t a, std::size_t b, int g) -> void {
+    std::uint64_t voxels = 0;
+    std::size_t owned = 0;
+    for (std::size_t i = a; i < b; ++i) {
+      voxels += bricks[i].voxels;
+      owned += mine(i) ? 1 : 0;
+    }
+    if (owned == 0) return;
+    if (g == B || (voxels <= options.window_group_voxels && owned == b - a)) {
+      std::vector<std::uint32_t>& group = groups.emplace_back();
+      for (std::size_t i = a; i < b; ++i)
+        if (mine(i)) group.push_back(std::uint32_t(i));
+      return;
+    }
+    const int shift = 3 * (B - g - 1);
+    for (std::size_t i = a; i < b;) {
+      std::size_t j = i;
+      while (j < b && (bricks[j].code >> shift & 7) == (bricks[i].code >> shift & 7)) ++j;
+      self(self, i, j, g + 1);
+      i = j;
+    }
+  };
+  visit(visit, 0, bricks.size(), 0);
+  return groups;
+}
+
 // Pass 0: each brick's voxels sorted and checked, coarser twins dropped, then indexed.
 void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st) {
   int finest = 0;
@@ -593,16 +638,16 @@ void BrickExtraction::Impl::prepare(const ProgressFn& progress, ExtractStats* st
   forget({"incoming"});
   // The bricks and their counts, from the tallies (they outlive the survivors, which pass 1
   // consumes).
-  std::vector<std::uint64_t> codes_kept;
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> codes_kept;  // (code, voxels)
   for (const Tally& t : box("tally_prepare").collect<Tally>(0)) {
     levels |= std::uint32_t(t.v[0]);
     st->voxels += t.v[1];
     st->coincident_voxels += t.v[2];
-    codes_kept.push_back(t.v[3]);
+    codes_kept.push_back({t.v[3], t.v[1]});
   }
   std::sort(codes_kept.begin(), codes_kept.end());
-  for (std::uint64_t code : codes_kept)
-    bricks.push_back({code, compact_bits(code), compact_bits(code >> 1), compact_bits(code >> 2)});
+  for (const auto& [code, count] : codes_kept)
+    bricks.push_back({code, compact_bits(code), compact_bits(code >> 1), compact_bits(code >> 2), count});
   if (done_before("tetrahedralize", ExtractJournal::kWholePass)) return;  // (its only reader; gone)
   occ.cells = box("occupancy").collect<std::uint64_t>(0);
   tbb::parallel_sort(occ.cells.begin(), occ.cells.end());
@@ -638,12 +683,24 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
     std::uint64_t tetrahedra, kept, windows, points, regrown, split, rejected, in_cubes;
   };
   static_assert(sizeof(Counters) == sizeof(Tally));
-  std::vector<std::uint64_t> codes(nb);
-  for (std::size_t i = 0; i < nb; ++i) codes[i] = m.bricks[i].code;
-  m.run_pass(windows_pass, codes, [&](std::size_t bi) {
+  // The pass's items are window groups (brick_extract.h): octree cells of bricks, named by their
+  // first brick's code.
+  const std::vector<std::vector<std::uint32_t>> groups = m.window_groups();
+  std::vector<std::uint64_t> group_items(groups.size());
+  std::unordered_map<std::uint64_t, std::size_t> group_of_item;
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    group_items[g] = m.bricks[groups[g][0]].code;
+    group_of_item[group_items[g]] = g;
+  }
+  windows_pass.sources = [&](std::uint64_t item, std::vector<std::uint64_t>& srcs) {
+    for (std::uint32_t b : groups.at(group_of_item.at(item))) srcs.push_back(m.bricks[b].code);
+  };
+  m.run_pass(windows_pass, group_items, [&](std::size_t gi) {
     Counters count{};
     {
-      const BrickInfo& X = m.bricks[bi];
+      const std::uint64_t item = group_items[gi];
+      std::vector<std::uint64_t> group_codes;  // ascending
+      for (std::uint32_t b : groups[gi]) group_codes.push_back(m.bricks[b].code);
       // Bricks held while X's windows are built (the cache may drop them meanwhile).
       std::unordered_map<std::uint64_t, std::shared_ptr<const BrickVoxels>> held;
       const auto hold = [&](std::uint64_t code) -> const BrickVoxels* {
@@ -663,7 +720,8 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
       // mostly made of. A finer level shares a window whose boxes hold its own; a window too big
       // for the memory budget is split in halves between its owners while they span more than
       // 2 h(L).
-      const BrickVoxels& own = *hold(X.code);
+      std::vector<const BrickVoxels*> own;
+      for (std::uint64_t code : group_codes) own.push_back(hold(code));
       const auto h = [&](int l) { return std::int64_t{1} << (m.G - l); };
       struct Window {
         std::uint32_t levels = 0;  // owner levels
@@ -687,19 +745,20 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
         Extent e;
         std::int64_t ob[kMaxLevel + 1][2][3];
         std::uint32_t with_owners = 0;
-        for (std::size_t i = 0; i < own.voxels.size(); ++i) {
-          const int L = own.voxels[i].key.level();
-          const LatticePoint& p = own.points[i];
-          if (!(w.levels >> L & 1) || !in_region(w, p)) continue;
-          if (!(with_owners >> L & 1)) {
-            with_owners |= 1u << L;
-            for (int a = 0; a < 3; ++a) ob[L][0][a] = ob[L][1][a] = p[a];
+        for (const BrickVoxels* b : own)
+          for (std::size_t i = 0; i < b->voxels.size(); ++i) {
+            const int L = b->voxels[i].key.level();
+            const LatticePoint& p = b->points[i];
+            if (!(w.levels >> L & 1) || !in_region(w, p)) continue;
+            if (!(with_owners >> L & 1)) {
+              with_owners |= 1u << L;
+              for (int a = 0; a < 3; ++a) ob[L][0][a] = ob[L][1][a] = p[a];
+            }
+            for (int a = 0; a < 3; ++a) {
+              ob[L][0][a] = std::min<std::int64_t>(ob[L][0][a], p[a]);
+              ob[L][1][a] = std::max<std::int64_t>(ob[L][1][a], p[a]);
+            }
           }
-          for (int a = 0; a < 3; ++a) {
-            ob[L][0][a] = std::min<std::int64_t>(ob[L][0][a], p[a]);
-            ob[L][1][a] = std::max<std::int64_t>(ob[L][1][a], p[a]);
-          }
-        }
         e.has_owners = with_owners != 0;
         if (!e.has_owners) return e;
         while (!(with_owners >> e.first & 1)) ++e.first;
@@ -739,10 +798,29 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
             }
         return e;
       };
+      // The voxels a window of extent e holds.
+      const auto members_of = [&](const Extent& e) {
+        std::size_t count = 0;
+        if (!e.has_owners) return count;
+        for (std::int64_t z = brick_axis_of(e.outer[0][2]); z <= brick_axis_of(e.outer[1][2]); ++z)
+          for (std::int64_t y = brick_axis_of(e.outer[0][1]); y <= brick_axis_of(e.outer[1][1]); ++y)
+            for (std::int64_t x = brick_axis_of(e.outer[0][0]); x <= brick_axis_of(e.outer[1][0]); ++x) {
+              const BrickVoxels* b = hold(morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
+              if (!b) continue;
+              for (std::size_t i = 0; i < b->voxels.size(); ++i) {
+                const LatticePoint& p = b->points[i];
+                const std::int64_t(&w)[2][3] = e.box[std::max(int(b->voxels[i].key.level()), e.first)];
+                count += p[0] >= w[0][0] && p[0] <= w[1][0] && p[1] >= w[0][1] && p[1] <= w[1][1] && p[2] >= w[0][2] &&
+                         p[2] <= w[1][2];
+              }
+            }
+        return count;
+      };
       std::vector<Window> windows;
       {
         std::uint32_t present = 0;
-        for (const SurfaceVoxel& s : own.voxels) present |= 1u << s.key.level();
+        for (const BrickVoxels* b : own)
+          for (const SurfaceVoxel& s : b->voxels) present |= 1u << s.key.level();
         for (int L = 0; L <= kMaxLevel; ++L) {  // coarse to fine
           if (!(present >> L & 1)) continue;
           Window alone;
@@ -767,11 +845,30 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
               break;
             }
           }
+          if (!joined) {
+            // Or the window whose union with this level's holds fewer voxels than the two apart,
+            // which would triangulate the voxels they share twice.
+            const std::size_t apart = members_of(mine);
+            for (Window& w : windows) {
+              Window both = w;
+              both.levels |= 1u << L;
+              if (members_of(extent_of(both)) <= members_of(extent_of(w)) + apart) {
+                w = both;
+                joined = true;
+                break;
+              }
+            }
+          }
           if (!joined) windows.push_back(alone);
         }
       }
-      // The cells X owns, over all its windows, by their voxels.
-      std::vector<std::array<const SurfaceVoxel*, 4>> owned;
+      // The cells the group's bricks own, over all its windows, by their voxels and owner brick
+      // (its place in group_codes).
+      struct Owned {
+        std::array<const SurfaceVoxel*, 4> voxels;
+        std::uint32_t brick;
+      };
+      std::vector<Owned> owned;
       std::vector<SnapOffer> offered;
       while (!windows.empty()) {
         const Window window = windows.back();
@@ -869,6 +966,7 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
                            ext.inner[1][0] == side && ext.inner[1][1] == side && ext.inner[1][2] == side;
         Counters mine{};
         std::vector<Tet> cells;
+        std::vector<std::uint32_t> cell_brick;  // per cell: its owner's place in group_codes
         bool certified = true;
         {
           {
@@ -899,10 +997,12 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
             }
             if (!(window.levels >> v.key[t[owner]].level() & 1)) return;
             const LatticePoint& op = member_points[t[owner]];
-            if (!in_region(window, op) ||
-                morton(std::uint32_t(brick_axis_of(op[0])), std::uint32_t(brick_axis_of(op[1])),
-                       std::uint32_t(brick_axis_of(op[2]))) != X.code)
-              return;
+            if (!in_region(window, op)) return;
+            const std::uint64_t owner_brick = morton(std::uint32_t(brick_axis_of(op[0])),
+                                                     std::uint32_t(brick_axis_of(op[1])),
+                                                     std::uint32_t(brick_axis_of(op[2])));
+            const auto slot = std::lower_bound(group_codes.begin(), group_codes.end(), owner_brick);
+            if (slot == group_codes.end() || *slot != owner_brick) return;
             if (!known && cubes.covers(t)) return;
             ++mine.tetrahedra;
             if (!keep_cell(t, v, n)) return;
@@ -927,6 +1027,7 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
               }
             }
             cells.push_back(t);
+            cell_brick.push_back(std::uint32_t(slot - group_codes.begin()));
           };
           const DelaunayTetrahedralization dt(tri_points, false, nullptr);
           dt.for_each_cell([&](const Tet& local) {
@@ -955,8 +1056,9 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
         count.tetrahedra += mine.tetrahedra;
         count.kept += mine.kept;
         count.rejected += mine.rejected;
-        for (const Tet& t : cells) {
-          owned.push_back({members[t[0]], members[t[1]], members[t[2]], members[t[3]]});
+        for (std::size_t ci = 0; ci < cells.size(); ++ci) {
+          const Tet& t = cells[ci];
+          owned.push_back({{members[t[0]], members[t[1]], members[t[2]], members[t[3]]}, cell_brick[ci]});
           const std::array<float, 4> d = cell_distances(t, v.distance);
           if (!(snap_fraction > 0 && cell_kind(d) == CellKind::kMixed)) continue;
           for (int i = 0; i < 4; ++i)
@@ -987,13 +1089,17 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
             }
         }
       }
-      if (!owned.empty()) {
-        // The piece: the cells' voxels in key order, the cells re-indexed (orientation kept). A
-        // voxel is one object while X holds its brick: distinct by address first (no key reads),
-        // then in key order.
+      // Each brick's piece: its cells' voxels in key order, the cells re-indexed (orientation
+      // kept). A voxel is one object while the group holds its brick: distinct by address first
+      // (no key reads), then in key order.
+      std::stable_sort(owned.begin(), owned.end(), [](const Owned& a, const Owned& b) { return a.brick < b.brick; });
+      for (std::size_t first = 0; first < owned.size();) {
+        std::size_t last = first;
+        while (last < owned.size() && owned[last].brick == owned[first].brick) ++last;
+        const std::uint64_t code = group_codes[owned[first].brick];
         std::vector<const SurfaceVoxel*> used;
-        used.reserve(4 * owned.size());
-        for (const auto& c : owned) used.insert(used.end(), c.begin(), c.end());
+        used.reserve(4 * (last - first));
+        for (std::size_t c = first; c < last; ++c) used.insert(used.end(), owned[c].voxels.begin(), owned[c].voxels.end());
         std::sort(used.begin(), used.end(), std::less<const SurfaceVoxel*>());
         used.erase(std::unique(used.begin(), used.end()), used.end());
         std::sort(used.begin(), used.end(), [](const SurfaceVoxel* p, const SurfaceVoxel* q) { return p->key < q->key; });
@@ -1004,11 +1110,14 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
           piece[i] = *used[i];
           index_of.insert(address(used[i]), std::uint32_t(i));
         }
-        std::vector<Tet> cells(owned.size());
-        for (std::size_t c = 0; c < owned.size(); ++c)
-          for (int k = 0; k < 4; ++k) cells[c][k] = std::uint32_t(index_of.find(address(owned[c][k])));
-        piece_voxels.post(X.code, X.code, piece);
-        piece_cells.post(X.code, X.code, cells);
+        std::vector<Tet> cells(last - first);
+        for (std::size_t c = first; c < last; ++c)
+          for (int k = 0; k < 4; ++k) cells[c - first][k] = std::uint32_t(index_of.find(address(owned[c].voxels[k])));
+        piece_voxels.post(code, code, piece);
+        piece_cells.post(code, code, cells);
+        first = last;
+      }
+      if (!offered.empty()) {
         // The closest offer per voxel (ties: the lower other key), grouped by the voxel's brick.
         std::vector<std::pair<std::uint64_t, SnapOffer>> by_brick(offered.size());
         for (std::size_t i = 0; i < offered.size(); ++i)
@@ -1027,13 +1136,13 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
           std::size_t j = i;
           std::vector<SnapOffer> to_brick;
           for (; j < by_brick.size() && by_brick[j].first == by_brick[i].first; ++j) to_brick.push_back(by_brick[j].second);
-          offers.post(by_brick[i].first, X.code, to_brick);
+          offers.post(by_brick[i].first, item, to_brick);
           i = j;
         }
       }
       Tally t;
       std::memcpy(&t, &count, sizeof(t));
-      m.box("tally_windows").post(0, X.code, std::vector<Tally>{t});
+      m.box("tally_windows").post(0, item, std::vector<Tally>{t});
     }
   }, progress, "tetrahedralize");
   {

@@ -8,9 +8,11 @@
 // mailboxes (storage/mailbox.h, every record written once and read once):
 //   0 prepare       sort each brick's voxels, check them, drop coarser coincident twins, index
 //                   the bricks (occupancy summary, levels present)
-//   1 tetrahedralize  each brick X triangulates a window per owner level L (the level-l voxels
-//                   within h(L) + n h(l) of its level-L voxels' box; split between the owners
-//                   when too big for the budget), keeps the certified global cells it owns (coarsest vertex in X),
+//   1 tetrahedralize  per window group (octree cells of bricks with at most window_group_voxels
+//                   voxels, or one brick), a window per owner level L (the level-l voxels
+//                   within h(L) + n h(l) of the group's level-L voxels' box; split between the owners
+//                   when too big for the budget) keeps the certified global cells each brick X
+//                   owns (coarsest vertex in X),
 //                   filtered by 7.1 and able to emit; posts them with their voxels, and posts
 //                   7.2 snap offers (the closest crossing per voxel) to each voxel's brick
 //   2 snap          each brick decides its voxels' snaps from all offers (as the global

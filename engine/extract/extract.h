@@ -62,6 +62,11 @@ struct ExtractOptions {
   // arena has more than one thread and there are at least this many voxels. The triangulation is
   // the same either way; 0 = parallel whenever the arena allows it.
   std::size_t parallel_min_voxels = 20000;
+  // Brick by brick: the tetrahedralization's windows cover octree cells of bricks holding at most
+  // this many voxels (one brick when it holds more), so that the halo each window needs around its
+  // owners (h(L) + n h(l) per level) is a small part of it. 0: one brick per window group. The
+  // mesh does not depend on it.
+  std::size_t window_group_voxels = std::size_t{1} << 17;
   // "global" | "bricks" | "auto": the fusion sets brick_level to its field's brick level for
   // "bricks", and for "auto" when the global tetrahedralization (kDelaunayBytesPerVoxel per voxel)
   // would not fit the memory limit.
