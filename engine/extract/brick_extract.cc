@@ -818,6 +818,10 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
       };
       std::vector<Window> windows;
       {
+        // Per window, the voxels it holds once counted (kUncounted until then): the level merge
+        // below asks for each window again with every finer level.
+        constexpr std::size_t kUncounted = ~std::size_t{0};
+        std::vector<std::size_t> held_voxels;
         std::uint32_t present = 0;
         for (const BrickVoxels* b : own)
           for (const SurfaceVoxel& s : b->voxels) present |= 1u << s.key.level();
@@ -841,6 +845,7 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
             }
             if (inside) {
               w.levels |= 1u << L;
+              held_voxels[std::size_t(&w - windows.data())] = kUncounted;
               joined = true;
               break;
             }
@@ -849,17 +854,22 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
             // Or the window whose union with this level's holds fewer voxels than the two apart,
             // which would triangulate the voxels they share twice.
             const std::size_t apart = members_of(mine);
-            for (Window& w : windows) {
-              Window both = w;
+            for (std::size_t k = 0; k < windows.size() && !joined; ++k) {
+              Window both = windows[k];
               both.levels |= 1u << L;
-              if (members_of(extent_of(both)) <= members_of(extent_of(w)) + apart) {
-                w = both;
+              if (held_voxels[k] == kUncounted) held_voxels[k] = members_of(extent_of(windows[k]));
+              const std::size_t together = members_of(extent_of(both));
+              if (together <= held_voxels[k] + apart) {
+                windows[k] = both;
+                held_voxels[k] = together;
                 joined = true;
-                break;
               }
             }
           }
-          if (!joined) windows.push_back(alone);
+          if (!joined) {
+            windows.push_back(alone);
+            held_voxels.push_back(kUncounted);
+          }
         }
       }
       // The cells the group's bricks own, over all its windows, by their voxels and owner brick
