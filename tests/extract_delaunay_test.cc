@@ -1,5 +1,8 @@
 // The Delaunay tetrahedralization of lattice points (massively cospherical) is unique: CGAL's
 // symbolic perturbation makes it independent of insertion order and of parallel insertion.
+#include <CGAL/Delaunay_triangulation_3.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_vertex_base_with_info_3.h>
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
@@ -138,6 +141,53 @@ TEST(ExtractDelaunay, UniqueOnLatticeSubsets) {
       arena.execute([&] { parallel = key_cells(shuffled, true); });
       EXPECT_EQ(parallel, reference) << "parallel, shuffle " << shuffle;
     }
+  }
+}
+
+// Our traits replace CGAL's in-sphere and orientation predicates and decide cospherical cases
+// themselves; stock CGAL (Epick's filtered predicates, Delaunay_triangulation_3's own symbolic
+// perturbation) must build the same cells. Mixed levels (spacings 1, 2, 4 lattice units) give
+// cospherical configurations of many shapes, not only unit cubes.
+TEST(ExtractDelaunay, SameCellsAsStockCgal) {
+  using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+  using Vb = CGAL::Triangulation_vertex_base_with_info_3<std::uint32_t, K>;
+  using Tds = CGAL::Triangulation_data_structure_3<Vb>;
+  using Stock = CGAL::Delaunay_triangulation_3<K, Tds>;
+  using IndexTet = std::array<std::uint32_t, 4>;
+  const auto sorted = [](IndexTet t) {
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  std::mt19937 rng(11);
+  for (int round = 0; round < 6; ++round) {
+    // Levels 6, 7, 8 of the same 16^3 region of the level-8 lattice, each thinned at random;
+    // a position taken by a coarser level is not repeated.
+    std::vector<LatticePoint> points;
+    for (int level : {6, 7, 8}) {
+      const int step = 1 << (8 - level), n = 16 / step;
+      std::vector<LatticePoint> l;
+      for (int z = 0; z < n; ++z)
+        for (int y = 0; y < n; ++y)
+          for (int x = 0; x < n; ++x) l.push_back({x * step, y * step, z * step});
+      std::shuffle(l.begin(), l.end(), rng);
+      l.resize(l.size() / std::size_t(2 + round % 3));
+      for (const LatticePoint& p : l)
+        if (std::find(points.begin(), points.end(), p) == points.end()) points.push_back(p);
+    }
+    SCOPED_TRACE("round " + std::to_string(round) + ", " + std::to_string(points.size()) + " points");
+    std::vector<std::pair<K::Point_3, std::uint32_t>> with_info;
+    for (std::size_t i = 0; i < points.size(); ++i)
+      with_info.emplace_back(K::Point_3(points[i][0], points[i][1], points[i][2]), std::uint32_t(i));
+    const Stock stock(with_info.begin(), with_info.end());
+    std::vector<IndexTet> expected;
+    for (auto c = stock.finite_cells_begin(); c != stock.finite_cells_end(); ++c)
+      expected.push_back(sorted({c->vertex(0)->info(), c->vertex(1)->info(), c->vertex(2)->info(), c->vertex(3)->info()}));
+    std::vector<IndexTet> ours;
+    for (const Tet& t : delaunay_tetrahedra(points, false)) ours.push_back(sorted(t));
+    std::sort(expected.begin(), expected.end());
+    std::sort(ours.begin(), ours.end());
+    ASSERT_GT(expected.size(), points.size());
+    EXPECT_EQ(ours, expected);
   }
 }
 

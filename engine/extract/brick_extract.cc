@@ -701,15 +701,34 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
       const std::uint64_t item = group_items[gi];
       std::vector<std::uint64_t> group_codes;  // ascending
       for (std::uint32_t b : groups[gi]) group_codes.push_back(m.bricks[b].code);
-      // Bricks held while X's windows are built (the cache may drop them meanwhile).
-      std::unordered_map<std::uint64_t, std::shared_ptr<const BrickVoxels>> held;
-      const auto hold = [&](std::uint64_t code) -> const BrickVoxels* {
+      // Bricks held while X's windows are built (the cache may drop them meanwhile). Their voxels
+      // get group-wide ids, consecutive per brick from its base (bases ascending in id_base).
+      struct Held {
+        std::shared_ptr<const BrickVoxels> brick;
+        std::uint32_t base;
+      };
+      std::unordered_map<std::uint64_t, Held> held;
+      std::vector<std::pair<std::uint32_t, const BrickVoxels*>> id_base;
+      std::uint32_t next_id = 0;
+      const auto hold_with_base = [&](std::uint64_t code) -> const Held* {
         auto it = held.find(code);
         if (it == held.end()) {
           if (m.ordinal(code) < 0) return nullptr;
-          it = held.emplace(code, m.load(code)).first;
+          std::shared_ptr<const BrickVoxels> b = m.load(code);
+          id_base.emplace_back(next_id, b.get());
+          it = held.emplace(code, Held{std::move(b), next_id}).first;
+          next_id += std::uint32_t(it->second.brick->voxels.size());
         }
-        return it->second.get();
+        return &it->second;
+      };
+      const auto hold = [&](std::uint64_t code) -> const BrickVoxels* {
+        const Held* h = hold_with_base(code);
+        return h ? h->brick.get() : nullptr;
+      };
+      const auto voxel_of = [&](std::uint32_t id) {
+        const auto it = std::prev(std::upper_bound(id_base.begin(), id_base.end(), id,
+                                                   [](std::uint32_t v, const auto& e) { return v < e.first; }));
+        return &it->second->voxels[id - it->first];
       };
       // Windows by owner level. A cell X owns has its coarsest vertex, of level L, in X, and by
       // 7.1 every other vertex, of level l >= L, within h(L) + n h(l) of it on each axis. So the
@@ -872,10 +891,10 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
           }
         }
       }
-      // The cells the group's bricks own, over all its windows, by their voxels and owner brick
-      // (its place in group_codes).
+      // The cells the group's bricks own, over all its windows, by their voxels' ids and owner
+      // brick (its place in group_codes).
       struct Owned {
-        std::array<const SurfaceVoxel*, 4> voxels;
+        std::array<std::uint32_t, 4> voxels;
         std::uint32_t brick;
       };
       std::vector<Owned> owned;
@@ -892,24 +911,34 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
         };
         std::vector<const SurfaceVoxel*> members;
         std::vector<LatticePoint> member_points;
+        std::vector<std::uint32_t> member_ids;
         {
-          std::vector<std::pair<std::uint64_t, std::pair<const SurfaceVoxel*, LatticePoint>>> found;
+          struct Found {
+            std::uint64_t key;
+            const SurfaceVoxel* voxel;
+            LatticePoint point;
+            std::uint32_t id;
+          };
+          std::vector<Found> found;
           for (std::int64_t z = brick_axis_of(ext.outer[0][2]); z <= brick_axis_of(ext.outer[1][2]); ++z)
             for (std::int64_t y = brick_axis_of(ext.outer[0][1]); y <= brick_axis_of(ext.outer[1][1]); ++y)
               for (std::int64_t x = brick_axis_of(ext.outer[0][0]); x <= brick_axis_of(ext.outer[1][0]); ++x) {
-                const BrickVoxels* b = hold(morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
-                if (!b) continue;
+                const Held* h = hold_with_base(morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
+                if (!h) continue;
+                const BrickVoxels* b = h->brick.get();
                 for (std::size_t i = 0; i < b->voxels.size(); ++i)
                   if (in_window(b->points[i], b->voxels[i].key.level()))
-                    found.push_back({b->voxels[i].key.bits, {&b->voxels[i], b->points[i]}});
+                    found.push_back({b->voxels[i].key.bits, &b->voxels[i], b->points[i], h->base + std::uint32_t(i)});
               }
           // Local index order = key order, as in the global extraction.
-          std::sort(found.begin(), found.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
+          std::sort(found.begin(), found.end(), [](const Found& p, const Found& q) { return p.key < q.key; });
           members.resize(found.size());
           member_points.resize(found.size());
+          member_ids.resize(found.size());
           for (std::size_t i = 0; i < found.size(); ++i) {
-            members[i] = found[i].second.first;
-            member_points[i] = found[i].second.second;
+            members[i] = found[i].voxel;
+            member_points[i] = found[i].point;
+            member_ids[i] = found[i].id;
           }
         }
         // Empty lattice cubes (lattice_cubes.h) give their cells outright; the voxels inside their
@@ -1068,7 +1097,7 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
         count.rejected += mine.rejected;
         for (std::size_t ci = 0; ci < cells.size(); ++ci) {
           const Tet& t = cells[ci];
-          owned.push_back({{members[t[0]], members[t[1]], members[t[2]], members[t[3]]}, cell_brick[ci]});
+          owned.push_back({{member_ids[t[0]], member_ids[t[1]], member_ids[t[2]], member_ids[t[3]]}, cell_brick[ci]});
           const std::array<float, 4> d = cell_distances(t, v.distance);
           if (!(snap_fraction > 0 && cell_kind(d) == CellKind::kMixed)) continue;
           for (int i = 0; i < 4; ++i)
@@ -1100,53 +1129,71 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
         }
       }
       // Each brick's piece: its cells' voxels in key order, the cells re-indexed (orientation
-      // kept). A voxel is one object while the group holds its brick: distinct by address first
-      // (no key reads), then in key order.
+      // kept). Distinct voxels by id first (a voxel is in some 20 cells: no sort of all their
+      // corners), then in key order.
       std::stable_sort(owned.begin(), owned.end(), [](const Owned& a, const Owned& b) { return a.brick < b.brick; });
+      constexpr std::uint32_t kUnused = ~std::uint32_t{0};
+      std::vector<std::uint32_t> first_use(owned.empty() ? 0 : next_id, kUnused);  // id -> place in `used`
       for (std::size_t first = 0; first < owned.size();) {
         std::size_t last = first;
         while (last < owned.size() && owned[last].brick == owned[first].brick) ++last;
         const std::uint64_t code = group_codes[owned[first].brick];
-        std::vector<const SurfaceVoxel*> used;
-        used.reserve(4 * (last - first));
-        for (std::size_t c = first; c < last; ++c) used.insert(used.end(), owned[c].voxels.begin(), owned[c].voxels.end());
-        std::sort(used.begin(), used.end(), std::less<const SurfaceVoxel*>());
-        used.erase(std::unique(used.begin(), used.end()), used.end());
-        std::sort(used.begin(), used.end(), [](const SurfaceVoxel* p, const SurfaceVoxel* q) { return p->key < q->key; });
-        FlatMap index_of(used.size());
-        const auto address = [](const SurfaceVoxel* p) { return std::uint64_t(reinterpret_cast<std::uintptr_t>(p)); };
-        std::vector<SurfaceVoxel> piece(used.size());
-        for (std::size_t i = 0; i < used.size(); ++i) {
-          piece[i] = *used[i];
-          index_of.insert(address(used[i]), std::uint32_t(i));
-        }
+        std::vector<std::uint32_t> used;  // ids, in first-use order
         std::vector<Tet> cells(last - first);
         for (std::size_t c = first; c < last; ++c)
-          for (int k = 0; k < 4; ++k) cells[c - first][k] = std::uint32_t(index_of.find(address(owned[c].voxels[k])));
+          for (int k = 0; k < 4; ++k) {
+            std::uint32_t& u = first_use[owned[c].voxels[k]];
+            if (u == kUnused) {
+              u = std::uint32_t(used.size());
+              used.push_back(owned[c].voxels[k]);
+            }
+            cells[c - first][k] = u;
+          }
+        std::vector<const SurfaceVoxel*> voxel(used.size());
+        for (std::size_t i = 0; i < used.size(); ++i) {
+          voxel[i] = voxel_of(used[i]);
+          first_use[used[i]] = kUnused;
+        }
+        std::vector<std::uint32_t> by_key(used.size());
+        std::iota(by_key.begin(), by_key.end(), 0u);
+        std::sort(by_key.begin(), by_key.end(), [&](std::uint32_t p, std::uint32_t q) { return voxel[p]->key < voxel[q]->key; });
+        std::vector<std::uint32_t> rank(used.size());
+        std::vector<SurfaceVoxel> piece(used.size());
+        for (std::size_t i = 0; i < by_key.size(); ++i) {
+          rank[by_key[i]] = std::uint32_t(i);
+          piece[i] = *voxel[by_key[i]];
+        }
+        for (Tet& t : cells)
+          for (std::uint32_t& i : t) i = rank[i];
         piece_voxels.post(code, code, piece);
         piece_cells.post(code, code, cells);
         first = last;
       }
       if (!offered.empty()) {
         // The closest offer per voxel (ties: the lower other key), grouped by the voxel's brick.
-        std::vector<std::pair<std::uint64_t, SnapOffer>> by_brick(offered.size());
+        // Sorted as small keys (an offer is 72 bytes), then gathered.
+        struct Order {
+          std::uint64_t brick, target, other;
+          std::uint32_t fraction_bits, index;
+        };
+        std::vector<Order> order(offered.size());
         for (std::size_t i = 0; i < offered.size(); ++i)
-          by_brick[i] = {m.brick_code_of_key(VoxelKey{offered[i].target}), offered[i]};
-        std::sort(by_brick.begin(), by_brick.end(), [](const auto& p, const auto& q) {
-          if (p.first != q.first) return p.first < q.first;
-          const SnapOffer &a = p.second, &b = q.second;
-          return a.target != b.target ? a.target < b.target
+          order[i] = {m.brick_code_of_key(VoxelKey{offered[i].target}), offered[i].target, offered[i].other,
+                      offered[i].fraction_bits, std::uint32_t(i)};
+        std::sort(order.begin(), order.end(), [](const Order& a, const Order& b) {
+          return a.brick != b.brick                 ? a.brick < b.brick
+                 : a.target != b.target             ? a.target < b.target
                  : a.fraction_bits != b.fraction_bits ? a.fraction_bits < b.fraction_bits
-                                                      : a.other < b.other;
+                                                    : a.other < b.other;
         });
-        by_brick.erase(std::unique(by_brick.begin(), by_brick.end(),
-                                   [](const auto& p, const auto& q) { return p.second.target == q.second.target; }),
-                       by_brick.end());
-        for (std::size_t i = 0; i < by_brick.size();) {
+        order.erase(std::unique(order.begin(), order.end(), [](const Order& a, const Order& b) { return a.target == b.target; }),
+                    order.end());
+        std::vector<SnapOffer> to_brick;
+        for (std::size_t i = 0; i < order.size();) {
           std::size_t j = i;
-          std::vector<SnapOffer> to_brick;
-          for (; j < by_brick.size() && by_brick[j].first == by_brick[i].first; ++j) to_brick.push_back(by_brick[j].second);
-          offers.post(by_brick[i].first, item, to_brick);
+          to_brick.clear();
+          for (; j < order.size() && order[j].brick == order[i].brick; ++j) to_brick.push_back(offered[order[j].index]);
+          offers.post(order[i].brick, item, to_brick);
           i = j;
         }
       }

@@ -59,17 +59,54 @@ struct LatticeTraits : Kernel {
       return CGAL::Orientation(sign(det3(Delta(q, p), Delta(r, p), Delta(s, p))));
     }
   };
+  // Never ON_ORIENTED_BOUNDARY: a zero determinant is decided here by the symbolic perturbation
+  // Delaunay_triangulation_3::side_of_oriented_sphere applies to it (with perturb = true, the only
+  // way insertion calls it, always with p, q, r, s positively oriented). On a lattice nearly every
+  // in-sphere test of neighbouring cells is cospherical; CGAL's generic perturbation sorts the five
+  // points through the traits each time, here the two largest are picked by packed coordinates.
+  // Same decisions, so the same triangulation.
   struct Side_of_oriented_sphere_3 {
     using result_type = CGAL::Oriented_side;
     CGAL::Oriented_side operator()(const Point& p, const Point& q, const Point& r, const Point& s,
                                    const Point& t) const {
       // det(P, R, Q, S) with rows (dx, dy, dz, |d|^2) relative to t, expanded along the lifted
-      // column: |d|^2 < 2^38 times a 3x3 determinant < 2^57, four terms: below 2^97.
+      // column: |d|^2 < 2^38 times a 3x3 determinant < 2^57, four terms: below 2^97. The four 3x3
+      // determinants share their six xy minors.
       const Delta a(p, t), b(r, t), c(q, t), d(s, t);
+      const std::int64_t ab = minor_xy(a, b), ac = minor_xy(a, c), ad = minor_xy(a, d), bc = minor_xy(b, c),
+                         bd = minor_xy(b, d), cd = minor_xy(c, d);
       const auto lift = [](const Delta& u) { return u.x * u.x + u.y * u.y + u.z * u.z; };
-      const Int128 det = -Int128(lift(a)) * det3(b, c, d) + Int128(lift(b)) * det3(a, c, d) -
-                         Int128(lift(c)) * det3(a, b, d) + Int128(lift(d)) * det3(a, b, c);
-      return CGAL::Oriented_side(sign(det));
+      const Int128 det = -Int128(lift(a)) * (b.z * cd - c.z * bd + d.z * bc) +
+                         Int128(lift(b)) * (a.z * cd - c.z * ad + d.z * ac) -
+                         Int128(lift(c)) * (a.z * bd - b.z * ad + d.z * ab) +
+                         Int128(lift(d)) * (a.z * bc - b.z * ac + c.z * ab);
+      if (det != 0) return CGAL::Oriented_side(sign(det));
+      return perturbed(p, q, r, s, t);
+    }
+    // CGAL's rule: of the five points in lexicographic order, the largest, then the second
+    // largest, decides: t itself gives the negative side, a cell vertex the orientation of the
+    // cell with that vertex replaced by t, unless that is coplanar.
+    static CGAL::Oriented_side perturbed(const Point& p0, const Point& p1, const Point& p2, const Point& p3,
+                                         const Point& t) {
+      const Point* points[5] = {&p0, &p1, &p2, &p3, &t};
+      std::uint64_t key[5];
+      for (int i = 0; i < 5; ++i)  // coordinates are integers in [0, 2^18]: 20 bits each
+        key[i] = std::uint64_t(points[i]->x()) << 40 | std::uint64_t(points[i]->y()) << 20 |
+                 std::uint64_t(points[i]->z());
+      int first = 0;
+      for (int i = 1; i < 5; ++i)
+        if (key[i] > key[first]) first = i;
+      int second = first == 0 ? 1 : 0;
+      for (int i = 0; i < 5; ++i)
+        if (i != first && key[i] > key[second]) second = i;
+      for (const int k : {first, second}) {
+        if (k == 4) return CGAL::ON_NEGATIVE_SIDE;  // p0..p3 are positively oriented
+        const Point* cell[4] = {&p0, &p1, &p2, &p3};
+        cell[k] = &t;
+        const int o = sign(det3(Delta(*cell[1], *cell[0]), Delta(*cell[2], *cell[0]), Delta(*cell[3], *cell[0])));
+        if (o != 0) return CGAL::Oriented_side(o);
+      }
+      return CGAL::ON_NEGATIVE_SIDE;  // unreachable for a positively oriented cell (CGAL asserts)
     }
   };
   // Lexicographic order, the symbolic perturbation's point order: on every degenerate in-sphere
@@ -214,25 +251,9 @@ int lattice_orientation(const LatticePoint& p, const LatticePoint& q, const Latt
 }
 
 int lattice_side_of_sphere(const LatticePoint* cell[4], const LatticePoint& t) {
-  const Point p[4] = {point_of(*cell[0]), point_of(*cell[1]), point_of(*cell[2]), point_of(*cell[3])};
-  const Point q = point_of(t);
-  const CGAL::Oriented_side os = LatticeTraits::Side_of_oriented_sphere_3()(p[0], p[1], p[2], p[3], q);
-  if (os != CGAL::ON_ORIENTED_BOUNDARY) return int(os);
-  // Delaunay_triangulation_3::side_of_oriented_sphere with perturb = true: sort the five points
-  // lexicographically; the largest decides, by the orientation with it replaced by t.
-  const Point* order[5] = {&p[0], &p[1], &p[2], &p[3], &q};
-  const LatticeTraits::Compare_xyz_3 compare;
-  std::sort(order, order + 5, [&](const Point* a, const Point* b) { return compare(*a, *b) == CGAL::SMALLER; });
-  const LatticeTraits::Orientation_3 orientation;
-  for (int i = 4; i > 2; --i) {
-    if (order[i] == &q) return -1;  // ON_NEGATIVE_SIDE
-    CGAL::Orientation o = CGAL::COPLANAR;
-    if (order[i] == &p[3] && (o = orientation(p[0], p[1], p[2], q)) != CGAL::COPLANAR) return int(o);
-    if (order[i] == &p[2] && (o = orientation(p[0], p[1], q, p[3])) != CGAL::COPLANAR) return int(o);
-    if (order[i] == &p[1] && (o = orientation(p[0], q, p[2], p[3])) != CGAL::COPLANAR) return int(o);
-    if (order[i] == &p[0] && (o = orientation(q, p[1], p[2], p[3])) != CGAL::COPLANAR) return int(o);
-  }
-  return -1;  // unreachable for a positively oriented cell (CGAL asserts)
+  // The traits' predicate perturbs on the sphere itself (see Side_of_oriented_sphere_3).
+  return int(LatticeTraits::Side_of_oriented_sphere_3()(point_of(*cell[0]), point_of(*cell[1]), point_of(*cell[2]),
+                                                        point_of(*cell[3]), point_of(t)));
 }
 
 std::vector<Tet> delaunay_tetrahedra(const std::vector<LatticePoint>& points, bool parallel) {

@@ -74,14 +74,12 @@ EmptyCubes::EmptyCubes(const std::vector<LatticePoint>& points, const std::vecto
     corners_.push_back(corner);
     cube_levels_ |= 1u << l;
   }
-  for (std::size_t i = 0; i < count; ++i) {
-    const int l = level[i];
-    const std::int64_t x = index_of(i, 0), y = index_of(i, 1), z = index_of(i, 2);
-    bool all = x > 0 && y > 0 && z > 0;
-    for (int c = 0; c < 8 && all; ++c)
-      all = cube_at_.find(cube_key(l, x - (c & 1), y - (c >> 1 & 1), z - (c >> 2 & 1))) >= 0;
-    interior_[i] = all;
-  }
+  // A point is interior when it is a corner of all 8 cubes of its level around it: corner c of
+  // one of them, for each c.
+  std::vector<std::uint8_t> as_corner(count, 0);
+  for (const std::array<std::uint32_t, 8>& corner : corners_)
+    for (int c = 0; c < 8; ++c) as_corner[corner[c]] |= std::uint8_t(1u << c);
+  for (std::size_t i = 0; i < count; ++i) interior_[i] = as_corner[i] == 0xFF;
 }
 
 bool EmptyCubes::covers(const LatticePoint& p0, const LatticePoint& p1, const LatticePoint& p2,
