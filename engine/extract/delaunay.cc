@@ -103,14 +103,14 @@ struct LatticeTraits : Kernel {
         if (k == 4) return CGAL::ON_NEGATIVE_SIDE;  // p0..p3 are positively oriented
         const Point* cell[4] = {&p0, &p1, &p2, &p3};
         cell[k] = &t;
-        const int o = sign(det3(Delta(*cell[1], *cell[0]), Delta(*cell[2], *cell[0]), Delta(*cell[3], *cell[0])));
-        if (o != 0) return CGAL::Oriented_side(o);
+        const CGAL::Orientation o = Orientation_3()(*cell[0], *cell[1], *cell[2], *cell[3]);
+        if (o != CGAL::COPLANAR) return CGAL::Oriented_side(o);
       }
       return CGAL::ON_NEGATIVE_SIDE;  // unreachable for a positively oriented cell (CGAL asserts)
     }
   };
-  // Lexicographic order, the symbolic perturbation's point order: on every degenerate in-sphere
-  // test CGAL sorts the five points with it, so keep it a plain double comparison.
+  // Lexicographic order, the symbolic perturbation's point order (CGAL still sorts with it in the
+  // coplanar in-circle tests of the hull's infinite cells), so keep it a plain double comparison.
   struct Compare_xyz_3 : Kernel::Compare_xyz_3 {
     using Kernel::Compare_xyz_3::operator();
     CGAL::Comparison_result operator()(const Point& p, const Point& q) const {

@@ -75,11 +75,9 @@ EmptyCubes::EmptyCubes(const std::vector<LatticePoint>& points, const std::vecto
     cube_levels_ |= 1u << l;
   }
   // A point is interior when it is a corner of all 8 cubes of its level around it: corner c of
-  // one of them, for each c.
-  std::vector<std::uint8_t> as_corner(count, 0);
+  // one of them, for each c (interior_ holds those 8 bits).
   for (const std::array<std::uint32_t, 8>& corner : corners_)
-    for (int c = 0; c < 8; ++c) as_corner[corner[c]] |= std::uint8_t(1u << c);
-  for (std::size_t i = 0; i < count; ++i) interior_[i] = as_corner[i] == 0xFF;
+    for (int c = 0; c < 8; ++c) interior_[corner[c]] |= std::uint8_t(1u << c);
 }
 
 bool EmptyCubes::covers(const LatticePoint& p0, const LatticePoint& p1, const LatticePoint& p2,

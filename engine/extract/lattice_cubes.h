@@ -47,7 +47,7 @@ class EmptyCubes {
   // Each empty cube's corners (point indices, corner x + 2y + 4z).
   const std::vector<std::array<std::uint32_t, 8>>& cubes() const { return corners_; }
   // Point i's incident cells all lie in empty cubes.
-  bool interior(std::size_t i) const { return interior_[i] != 0; }
+  bool interior(std::size_t i) const { return interior_[i] == 0xFF; }
   // Does the closed union of the empty cubes hold the centroid of the cell (point indices, positive
   // volume)? For a cell of the triangulation of the non-interior points: it is then a cube's cell
   // or not global; otherwise it is a global cell (see above).
@@ -60,7 +60,7 @@ class EmptyCubes {
   std::vector<std::array<std::uint32_t, 8>> corners_;
   FlatMap cube_at_;  // cube key (level, minimum corner) -> index in corners_
   std::uint32_t cube_levels_ = 0;  // bit l: some empty cube of level l
-  std::vector<std::uint8_t> interior_;
+  std::vector<std::uint8_t> interior_;  // per point: bit c set iff it is corner c of an empty cube
 };
 
 }  // namespace sf::extract_detail
