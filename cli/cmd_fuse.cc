@@ -119,6 +119,11 @@ nlohmann::json stats_json(const FusionStats& s, const MeshCounts& mesh) {
                   {"resumed_items", s.extract.resumed_items},
                   {"window_cells_rejected", s.extract.window_cells_rejected},
                   {"mode", s.extract.by_brick ? "bricks" : "global"}};
+  if (!s.extract.pass_seconds.empty()) {
+    nlohmann::json passes = nlohmann::json::object();
+    for (const auto& [pass, seconds] : s.extract.pass_seconds) passes[pass] = seconds;
+    j["extract"]["pass_seconds"] = passes;
+  }
   j["mesh"] = {{"vertices", mesh.vertices}, {"triangles", mesh.triangles}};
   nlohmann::json times = nlohmann::json::object();
   for (const auto& t : s.times) times[t.stage] = t.seconds;

@@ -126,7 +126,9 @@ TEST(CliValidScene, ExtractionByBricksGivesTheGlobalMeshOnTheRealBunny) {
   const std::string config = " --config " + (fs::path(SCALEFUSE_SOURCE_DIR) / "configs" / "laser.toml").string();
   const fs::path global = root / "global.ply", bricks = root / "bricks.ply", stats = root / "bricks.json";
   ASSERT_EQ(fuse(scans, global, config + " --extract global").code, 0);
-  const CliRun r = fuse(scans, bricks, config + " --extract bricks --stats " + stats.string());
+  // Groups of 131,072 voxels (a quarter of the default): more windows, so more seams between them.
+  const CliRun r = fuse(scans, bricks,
+                        config + " --extract bricks --set extract.window_group_voxels=131072 --stats " + stats.string());
   ASSERT_EQ(r.code, 0) << r.output;
   std::ifstream a(global, std::ios::binary), b(bricks, std::ios::binary);
   const std::string ga((std::istreambuf_iterator<char>(a)), {}), gb((std::istreambuf_iterator<char>(b)), {});
@@ -136,6 +138,12 @@ TEST(CliValidScene, ExtractionByBricksGivesTheGlobalMeshOnTheRealBunny) {
   EXPECT_EQ(j["extract"]["mode"], "bricks");
   EXPECT_GT(j["extract"]["windows"].get<int>(), 20);  // window groups of several bricks
   EXPECT_GT(j["extract"]["window_cells_rejected"].get<int>(), 0);
+  // Every pass ran in this run and is timed.
+  for (const char* pass : {"prepare", "tetrahedralize", "snap", "march", "number", "faces", "sort", "write"}) {
+    ASSERT_TRUE(j["extract"]["pass_seconds"].contains(pass)) << pass;
+    EXPECT_GE(j["extract"]["pass_seconds"][pass].get<double>(), 0.0) << pass;
+  }
+  EXPECT_GT(j["extract"]["pass_seconds"]["tetrahedralize"].get<double>(), 0.01);
   EXPECT_FALSE(fs::exists(fs::path(bricks.string() + ".job") / "scratch")) << "scratch files are removed";
   // Bricks 4x smaller (level 5, 6 mm): paging, regularization and extraction all cut differently.
   const fs::path small = root / "small.ply", small_stats = root / "small.json";

@@ -424,7 +424,9 @@ TEST(ExtractSurface, BrickByBrickGivesTheGlobalMesh) {
 
 TEST(ExtractSurface, WindowsSplitToFitTheMemoryBudgetGiveTheGlobalMesh) {
   // A budget of a few thousand points per window: windows are split in halves between their
-  // owners, and their triangulations run one at a time. The mesh stays the global one.
+  // owners, and their triangulations run one at a time. The mesh stays the global one. With small
+  // window groups, each of the two threads' groups holds more bricks than the whole budget between
+  // its windows: they must still take turns, not wait on each other for ever.
   const RootCube root = test_root();
   std::vector<SurfaceVoxel> voxels = band(root, 4, 3.0, sphere({0.05, 0, 0}, 0.35));
   const std::vector<SurfaceVoxel> fine = band(root, 6, 2.5, sphere({0.05, 0, 0}, 0.35),
@@ -433,10 +435,12 @@ TEST(ExtractSurface, WindowsSplitToFitTheMemoryBudgetGiveTheGlobalMesh) {
   const ExtractOptions o;
   const Mesh reference = extract_surface(voxels, root, o, nullptr, nullptr);
   ASSERT_GT(reference.faces.size(), 1000u);
-  for (int brick_level : {1, 2}) {
+  for (int brick_level : {1, 2, 3}) {
     SCOPED_TRACE("brick level " + std::to_string(brick_level));
+    ExtractOptions by_brick = o;
+    if (brick_level == 3) by_brick.window_group_voxels = 2000;
     const ScratchFolder scratch("scalefuse-split-test");
-    BrickExtraction bricks(scratch.path(), root, brick_level, o, std::size_t{4} << 20);  // 3,200 points a window
+    BrickExtraction bricks(scratch.path(), root, brick_level, by_brick, std::size_t{4} << 20);  // 3,200 points a window
     bricks.add(0, voxels);
     bricks.all_added();
     MeshCollector mesh;

@@ -167,12 +167,25 @@ struct BrickExtraction::Impl {
   int B;  // brick level
   ExtractOptions options;
   std::size_t cache_bytes;
-  // Window triangulations in flight, by estimated bytes: a thread waits while the others' windows
-  // and its own would pass the budget (a window alone always runs).
+  // Window triangulations in flight, by estimated bytes, and what the groups being built hold
+  // between their windows (bricks, owned cells, snap offers): a thread waits while all that and its
+  // window would pass the budget. A window alone (no other in flight) always runs, so that threads
+  // whose groups hold much never wait on each other for ever.
   std::size_t window_budget;
   std::mutex window_mutex;
   std::condition_variable window_freed;
-  std::size_t window_bytes = 0;
+  std::size_t window_bytes = 0;  // windows in flight and groups' standing bytes
+  int windows_in_flight = 0;
+  // Sets a group's standing bytes (held in `held`) to `now` in window_bytes; never waits: a group's
+  // bricks are already loaded when it is counted.
+  void hold_standing(std::size_t& held, std::size_t now) {
+    {
+      std::lock_guard lock(window_mutex);
+      window_bytes = window_bytes - held + now;
+    }
+    if (now < held) window_freed.notify_all();
+    held = now;
+  }
 
   // Progress and the mailboxes, durable through the journal when there is one.
   ExtractJournal* journal = nullptr;
@@ -205,6 +218,7 @@ struct BrickExtraction::Impl {
   }
   void write_manifest(const Pass& p);
   mutable std::atomic<std::size_t> resumed{0};  // items skipped: an earlier run finished them
+  std::vector<std::pair<std::string, double>> pass_seconds;  // ExtractStats::pass_seconds
   const std::atomic<bool>* stop = nullptr;      // set_stop()
   bool stopping() const { return stop && stop->load(std::memory_order_relaxed); }
 
@@ -371,6 +385,7 @@ void BrickExtraction::Impl::run_pass(Pass& p, const std::vector<std::uint64_t>& 
     return;
   }
   for (const std::string& name : p.outputs) box(name);  // made before the threads post to them
+  const auto start = std::chrono::steady_clock::now();
   std::atomic<std::size_t> done{0}, left{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, items.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t k = r.begin(); k != r.end(); ++k) {
@@ -397,6 +412,7 @@ void BrickExtraction::Impl::run_pass(Pass& p, const std::vector<std::uint64_t>& 
     throw Interrupted("interrupted in the extraction's " + p.name + " pass (" + std::to_string(left.load()) + " of " +
                       std::to_string(items.size()) + " bricks left)");
   release_freed_memory();
+  pass_seconds.emplace_back(p.name, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   if (this_stage) throw StageEnd{};
 }
 
@@ -899,6 +915,20 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
       };
       std::vector<Owned> owned;
       std::vector<SnapOffer> offered;
+      // What the group holds between its windows, counted in the window budget (Impl::hold_standing):
+      // its cells, offers and brick table. Not its bricks: they are the cache's (a quarter of the
+      // budget), and counting them twice made groups take turns needlessly (city: 165 % CPU and
+      // the windows pass 1.3x slower than without them, bench/README.md session 23).
+      const auto standing_now = [&] {
+        return owned.capacity() * sizeof(Owned) + offered.capacity() * sizeof(SnapOffer) +
+               held.size() * 64 + id_base.capacity() * sizeof(id_base[0]);
+      };
+      std::size_t standing = 0;
+      struct Unhold {
+        Impl& m;
+        std::size_t& standing;
+        ~Unhold() { m.hold_standing(standing, 0); }
+      } unhold{m, standing};
       while (!windows.empty()) {
         const Window window = windows.back();
         windows.pop_back();
@@ -1008,10 +1038,12 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
         std::vector<std::uint32_t> cell_brick;  // per cell: its owner's place in group_codes
         bool certified = true;
         {
+          m.hold_standing(standing, standing_now());
           {
             std::unique_lock lock(m.window_mutex);
-            m.window_freed.wait(lock, [&] { return m.window_bytes == 0 || m.window_bytes + need <= m.window_budget; });
+            m.window_freed.wait(lock, [&] { return m.windows_in_flight == 0 || m.window_bytes + need <= m.window_budget; });
             m.window_bytes += need;
+            ++m.windows_in_flight;
           }
           struct Release {
             Impl& m;
@@ -1020,6 +1052,7 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
               {
                 std::lock_guard lock(m.window_mutex);
                 m.window_bytes -= bytes;
+                --m.windows_in_flight;
               }
               m.window_freed.notify_all();
             }
@@ -1133,6 +1166,7 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
       // corners), then in key order.
       std::stable_sort(owned.begin(), owned.end(), [](const Owned& a, const Owned& b) { return a.brick < b.brick; });
       constexpr std::uint32_t kUnused = ~std::uint32_t{0};
+      m.hold_standing(standing, standing_now() + (owned.empty() ? 0 : next_id) * sizeof(std::uint32_t));
       std::vector<std::uint32_t> first_use(owned.empty() ? 0 : next_id, kUnused);  // id -> place in `used`
       for (std::size_t first = 0; first < owned.size();) {
         std::size_t last = first;
@@ -1503,6 +1537,7 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
 
   // --- Pass 7: components, then the stream ---------------------------------------------------------
   report(progress, "extract", 4, kStages);
+  const auto write_start = std::chrono::steady_clock::now();
   const std::size_t V = std::size_t(total_vertices);
   // remap[v]: output number of vertex v, or kGone. Vertices only cancelled zero faces used, and
   // those of small components, are dropped.
@@ -1577,6 +1612,9 @@ void BrickExtraction::run_passes(MeshStream& out, const ProgressFn& progress, Ex
     }
   }
   out.end();
+  m.pass_seconds.emplace_back("write",
+                              std::chrono::duration<double>(std::chrono::steady_clock::now() - write_start).count());
+  st.pass_seconds = m.pass_seconds;
   st.triangles = faces_out;
   report(progress, "extract", kStages, kStages);
   st.resumed_items = m.resumed.load();

@@ -66,7 +66,7 @@ struct ExtractOptions {
   // this many voxels (one brick when it holds more), so that the halo each window needs around its
   // owners (h(L) + n h(l) per level) is a small part of it. 0: one brick per window group. The
   // mesh does not depend on it.
-  std::size_t window_group_voxels = std::size_t{1} << 17;
+  std::size_t window_group_voxels = std::size_t{1} << 19;
   // "global" | "bricks" | "auto": the fusion sets brick_level to its field's brick level for
   // "bricks", and for "auto" when the global tetrahedralization (kDelaunayBytesPerVoxel per voxel)
   // would not fit the memory limit.
@@ -107,6 +107,9 @@ struct ExtractStats {
   // regularization and the passes, that this run skipped.
   std::size_t resumed_items = 0;
   bool by_brick = false;  // which tetrahedralization ran
+  // Brick by brick: wall seconds of each pass this run ran (a pass an earlier run finished is not
+  // listed), then "write" for the PLY; in order.
+  std::vector<std::pair<std::string, double>> pass_seconds;
 };
 
 // 7.1: are voxels a and b neighbours? With A the coarser (L(A) <= L(B)), b must lie within
