@@ -168,7 +168,7 @@ struct BrickExtraction::Impl {
   ExtractOptions options;
   std::size_t cache_bytes;
   // Window triangulations in flight, by estimated bytes, and what the groups being built hold
-  // between their windows (bricks, owned cells, snap offers): a thread waits while all that and its
+  // between their windows (owned cells, snap offers): a thread waits while all that and its
   // window would pass the budget. A window alone (no other in flight) always runs, so that threads
   // whose groups hold much never wait on each other for ever.
   std::size_t window_budget;
@@ -176,8 +176,8 @@ struct BrickExtraction::Impl {
   std::condition_variable window_freed;
   std::size_t window_bytes = 0;  // windows in flight and groups' standing bytes
   int windows_in_flight = 0;
-  // Sets a group's standing bytes (held in `held`) to `now` in window_bytes; never waits: a group's
-  // bricks are already loaded when it is counted.
+  // Sets a group's standing bytes (held in `held`) to `now` in window_bytes; never waits: what it
+  // counts is already made.
   void hold_standing(std::size_t& held, std::size_t now) {
     {
       std::lock_guard lock(window_mutex);
