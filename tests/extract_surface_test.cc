@@ -425,8 +425,8 @@ TEST(ExtractSurface, BrickByBrickGivesTheGlobalMesh) {
 TEST(ExtractSurface, WindowsSplitToFitTheMemoryBudgetGiveTheGlobalMesh) {
   // A budget of a few thousand points per window: windows are split in halves between their
   // owners, and their triangulations run one at a time. The mesh stays the global one. With small
-  // window groups, each of the two threads' groups holds more bricks than the whole budget between
-  // its windows: they must still take turns, not wait on each other for ever.
+  // window groups, both threads' groups hold cells counted in the budget between their windows:
+  // they must still take turns, not wait on each other for ever.
   const RootCube root = test_root();
   std::vector<SurfaceVoxel> voxels = band(root, 4, 3.0, sphere({0.05, 0, 0}, 0.35));
   const std::vector<SurfaceVoxel> fine = band(root, 6, 2.5, sphere({0.05, 0, 0}, 0.35),

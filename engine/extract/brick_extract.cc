@@ -176,15 +176,15 @@ struct BrickExtraction::Impl {
   std::condition_variable window_freed;
   std::size_t window_bytes = 0;  // windows in flight and groups' standing bytes
   int windows_in_flight = 0;
-  // Sets a group's standing bytes (held in `held`) to `now` in window_bytes; never waits: what it
-  // counts is already made.
-  void hold_standing(std::size_t& held, std::size_t now) {
+  // Sets a group's standing bytes (`counted`, what window_bytes holds for it) to `now`; never
+  // waits: what it counts is already made.
+  void hold_standing(std::size_t& counted, std::size_t now) {
     {
       std::lock_guard lock(window_mutex);
-      window_bytes = window_bytes - held + now;
+      window_bytes = window_bytes - counted + now;
     }
-    if (now < held) window_freed.notify_all();
-    held = now;
+    if (now < counted) window_freed.notify_all();
+    counted = now;
   }
 
   // Progress and the mailboxes, durable through the journal when there is one.
