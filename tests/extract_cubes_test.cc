@@ -185,5 +185,70 @@ TEST(ExtractCubes, CubesPlusCertifiedRestGiveTheFullTetrahedralization) {
   }
 }
 
+TEST(ExtractCubes, PointsInKeyOrderGiveTheSameCubes) {
+  // A window's members come in key order (level, z, y, x) and skip the sort; the cubes, the
+  // interior points and the covered cells must not depend on the order. Two levels with holes.
+  const int G = 5;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<LatticePoint> points;
+  std::vector<std::uint8_t> level;
+  std::set<LatticePoint> taken;
+  for (int z = 4; z <= 12; ++z)
+    for (int y = 4; y <= 12; ++y)
+      for (int x = 4; x <= 12; ++x)
+        if (u(rng) < 0.95) {
+          points.push_back({x, y, z});
+          level.push_back(G);
+          taken.insert(points.back());
+        }
+  for (int z = 0; z <= 8; ++z)
+    for (int y = 0; y <= 8; ++y)
+      for (int x = 0; x <= 8; ++x)
+        if (!taken.count({2 * x, 2 * y, 2 * z}) && u(rng) < 0.95) {
+          points.push_back({2 * x, 2 * y, 2 * z});
+          level.push_back(G - 1);
+        }
+  std::vector<std::uint32_t> order(points.size());
+  for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  const auto key = [&](std::uint32_t i) {
+    const int s = G - level[i];
+    return std::array<std::int64_t, 4>{level[i], points[i][2] >> s, points[i][1] >> s, points[i][0] >> s};
+  };
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key(a) < key(b); });
+  ASSERT_NE(order.front(), 0u);  // the original order is not key order: both paths run
+  std::vector<LatticePoint> sorted_points;
+  std::vector<std::uint8_t> sorted_level;
+  for (std::uint32_t i : order) {
+    sorted_points.push_back(points[i]);
+    sorted_level.push_back(level[i]);
+  }
+  const std::uint32_t levels = (1u << G) | (1u << (G - 1));
+  const EmptyCubes a(points, level, G, levels, kHoldsAll);
+  const EmptyCubes b(sorted_points, sorted_level, G, levels, kHoldsAll);
+  std::set<std::array<std::uint32_t, 8>> cubes_a, cubes_b;
+  for (const auto& c : a.cubes()) cubes_a.insert(c);
+  for (auto c : b.cubes()) {
+    for (std::uint32_t& i : c) i = order[i];
+    cubes_b.insert(c);
+  }
+  EXPECT_EQ(cubes_a, cubes_b);
+  EXPECT_GT(cubes_a.size(), 100u);
+  std::size_t interior = 0;
+  for (std::size_t s = 0; s < order.size(); ++s) {
+    EXPECT_EQ(a.interior(order[s]), b.interior(s)) << s;
+    interior += b.interior(s);
+  }
+  EXPECT_GT(interior, 50u);
+  // Cells with corners of two levels are never covered; a cube's own cells are.
+  for (const auto& corner : a.cubes()) {
+    for (const auto& c : kCubeCells) EXPECT_TRUE(a.covers(Tet{corner[c[0]], corner[c[1]], corner[c[2]], corner[c[3]]}));
+  }
+  const auto& corner = a.cubes().front();
+  std::uint32_t other = 0;
+  while (level[other] == level[corner[0]]) ++other;
+  EXPECT_FALSE(a.covers(Tet{corner[0], corner[1], corner[2], other}));
+}
+
 }  // namespace
 }  // namespace sf::extract_detail

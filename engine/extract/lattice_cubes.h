@@ -51,11 +51,24 @@ class EmptyCubes {
   // Does the closed union of the empty cubes hold the centroid of the cell (point indices, positive
   // volume)? For a cell of the triangulation of the non-interior points: it is then a cube's cell
   // or not global; otherwise it is a global cell (see above).
-  bool covers(const Tet& t) const { return covers(points_[t[0]], points_[t[1]], points_[t[2]], points_[t[3]]); }
+  //
+  // Such a cell has its four corners on one level, the level of the cubes that cover it: a closed
+  // empty cube of level l holds no voxel but its 8 corners (the rest of it is inside the sphere),
+  // so closed empty cubes of different levels are disjoint (one's corners would lie in the
+  // other), and a cell of the first kind is a cube's cell, one of the second kind lies in the
+  // union of the stars of the left-out voxels (one level's cubes per connected part) and has
+  // their corners as vertices. So only that level is looked up, and a cell of mixed levels, or
+  // with a corner that is no empty cube's, is not covered.
+  bool covers(const Tet& t) const;
+  // The same for any four points of the lattice, looked up at every level.
   bool covers(const LatticePoint& a, const LatticePoint& b, const LatticePoint& c, const LatticePoint& d) const;
 
  private:
+  // 4 x the centroid of the four points is in a closed empty cube of level l.
+  bool covers_at(int l, const std::int64_t centroid4[3]) const;
+
   const std::vector<LatticePoint>& points_;
+  const std::vector<std::uint8_t>& level_;
   int G_;
   std::vector<std::array<std::uint32_t, 8>> corners_;
   FlatMap cube_at_;  // cube key (level, minimum corner) -> index in corners_
