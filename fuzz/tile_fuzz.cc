@@ -43,8 +43,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     put32(h + 28, get32(data + 1) % 4096);
     put64(h + 32, raw_size);
     put64(h + 40, stored.size());
-    put64(h + 48, sf::fnv1a64(stored.data(), stored.size()));
-    put64(h + 56, sf::fnv1a64(h, 56));
+    put64(h + 48, sf::tile_checksum(sf::kTileVersion, stored.data(), stored.size()));
+    put64(h + 56, sf::tile_checksum(sf::kTileVersion, h, 56));
     file.assign(h, h + 64);
     file.insert(file.end(), stored.begin(), stored.end());
   }

@@ -4,6 +4,7 @@
 #include <sys/mman.h>
 #include <lz4.h>
 #include <unistd.h>
+#include <xxhash.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -210,8 +211,8 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   put32(h + 28, std::uint32_t(blocks.size()));
   put64(h + 32, raw_size);
   put64(h + 40, std::uint64_t(packed));
-  put64(h + 48, fnv1a64(h + kHeaderBytes, std::size_t(packed)));
-  put64(h + 56, fnv1a64(h, 56));
+  put64(h + 48, tile_checksum(kTileVersion, h + kHeaderBytes, std::size_t(packed)));
+  put64(h + 56, tile_checksum(kTileVersion, h, 56));
   const std::size_t total = kHeaderBytes + std::size_t(packed);
 
   // Temporary name in the same directory, fsync, rename, fsync the directory.
@@ -249,6 +250,10 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   return total;
 }
 
+std::uint64_t tile_checksum(std::uint32_t version, const void* data, std::size_t size) {
+  return version == 1 ? fnv1a64(data, size) : XXH3_64bits(data, size);
+}
+
 BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuffers* buffers) {
   TileBuffers unpooled(0);
   TileBuffers& pool = buffers ? *buffers : unpooled;
@@ -264,10 +269,13 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
   in.read(reinterpret_cast<char*>(h), kHeaderBytes);
   if (!in) throw bad("cannot read the header");
   if (std::memcmp(h, kMagic, 8) != 0) throw bad("wrong magic (not a scalefuse tile)");
-  if (get64(h + 56) != fnv1a64(h, 56)) throw bad("header checksum mismatch");
-  const std::uint32_t version = get32(h + 8);
-  if (version != kTileVersion)
-    throw bad("format version " + std::to_string(version) + ", this build reads " + std::to_string(kTileVersion));
+  // The version picks the checksum, so it is read before the header is known to be intact; a
+  // damaged version gives the wrong checksum and fails below all the same.
+  std::uint32_t version = get32(h + 8);
+  if (version != 1 && version != kTileVersion) version = kTileVersion;
+  if (get64(h + 56) != tile_checksum(version, h, 56)) throw bad("header checksum mismatch");
+  if (get32(h + 8) != version)
+    throw bad("format version " + std::to_string(get32(h + 8)) + ", this build reads 1 to " + std::to_string(kTileVersion));
   const int brick_level = int(get32(h + 12));
   if (brick_level != out.brick_level())
     throw bad("brick level " + std::to_string(brick_level) + ", the job uses " + std::to_string(out.brick_level()));
@@ -283,7 +291,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
   PageBuffer stored(stored_size, pool);
   in.read(reinterpret_cast<char*>(stored.data()), std::streamsize(stored_size));
   if (!in) throw bad("cannot read the payload");
-  if (get64(h + 48) != fnv1a64(stored.data(), stored.size())) throw bad("payload checksum mismatch");
+  if (get64(h + 48) != tile_checksum(version, stored.data(), stored.size())) throw bad("payload checksum mismatch");
   PageBuffer raw(raw_size, pool);
   if (raw_size > 0) {
     const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(stored.data()), reinterpret_cast<char*>(raw.data()),

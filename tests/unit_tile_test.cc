@@ -125,6 +125,54 @@ TEST(Tile, EveryFlippedByteIsDetectedAndNamesTheTile) {
   EXPECT_GT(positions.size(), 80u);
 }
 
+// A job written before checksums moved to XXH3 (tile format 1: FNV-1a, otherwise the same bytes)
+// resumes: its tiles still read. A tile of a later format is refused by name, not as damage.
+TEST(Tile, FormatOneTilesStillReadAndLaterFormatsAreRefused) {
+  const auto dir = scratch_dir("tile_versions");
+  VoxelTable t(3);
+  fill(t, sample_voxels());
+  const auto path = dir / "v2.tile";
+  write_tile(path, {2, 0, 2}, t);
+  std::vector<char> bytes = bytes_of(path);
+  auto rewrite = [&](std::uint32_t version, std::uint64_t (*checksum)(const void*, std::size_t)) {
+    std::vector<char> b = bytes;
+    unsigned char* h = reinterpret_cast<unsigned char*>(b.data());
+    auto put = [](unsigned char* p, std::uint64_t v, int n) {
+      for (int i = 0; i < n; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
+    };
+    put(h + 8, version, 4);
+    put(h + 48, checksum(h + 64, b.size() - 64), 8);
+    put(h + 56, checksum(h, 56), 8);
+    return b;
+  };
+  auto write_bytes = [](const std::filesystem::path& p, const std::vector<char>& b) {
+    std::ofstream out(p, std::ios::binary);
+    out.write(b.data(), std::streamsize(b.size()));
+  };
+  EXPECT_EQ(bytes[8], 2);  // this build writes format 2
+  auto fnv = [](const void* d, std::size_t n) { return fnv1a64(d, n); };
+  auto xxh3 = [](const void* d, std::size_t n) { return tile_checksum(2, d, n); };
+  // The payload checksum really changed: FNV-1a and XXH3 differ on these bytes.
+  ASSERT_NE(fnv(bytes.data() + 64, bytes.size() - 64), xxh3(bytes.data() + 64, bytes.size() - 64));
+  write_bytes(dir / "v1.tile", rewrite(1, fnv));
+  VoxelTable a(3), b(3);
+  read_tile(path, a);
+  read_tile(dir / "v1.tile", b);
+  EXPECT_EQ(b.live_count(), a.live_count());
+  for (const auto& [k, d] : sample_voxels()) {
+    ASSERT_NE(b.find(k), nullptr);
+    EXPECT_EQ(b.find(k)->distance, d.distance);
+  }
+  // Format 1 with XXH3 checksums, or format 2 with FNV-1a ones, is damage.
+  write_bytes(dir / "mixed.tile", rewrite(1, xxh3));
+  VoxelTable r(3);
+  expect_input_error([&] { read_tile(dir / "mixed.tile", r); }, "mixed.tile", "header checksum mismatch");
+  write_bytes(dir / "mixed2.tile", rewrite(2, fnv));
+  expect_input_error([&] { read_tile(dir / "mixed2.tile", r); }, "mixed2.tile", "header checksum mismatch");
+  write_bytes(dir / "v3.tile", rewrite(3, xxh3));
+  expect_input_error([&] { read_tile(dir / "v3.tile", r); }, "v3.tile", "format version 3, this build reads 1 to 2");
+}
+
 TEST(Tile, TruncationWrongMagicAndWrongBrickLevelAreRefused) {
   const auto dir = scratch_dir("tile_refusals");
   VoxelTable t(3);
