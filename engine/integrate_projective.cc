@@ -12,6 +12,7 @@
 // write their voxels concurrently without locks (blocks are created under their brick's lock).
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <atomic>
@@ -135,12 +136,20 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   p.quad.assign(std::size_t(QW) * std::size_t(QH), Quad{});
   for (std::size_t t = 0; t < triangles.size(); ++t) {
     const FrameTriangle& tri = triangles[t];
-    int r0 = frame.height, c0 = W, r1 = -1, c1 = -1;
+    // One division per triangle (this loop runs for every read of a frame, and a sweep reads a
+    // far view once per plan tile): a vertex of a triangle within one quad lies in the lowest
+    // index's row or the next, so its row and column follow from its offset to that index.
+    const std::uint32_t lowest = std::min({tri[0], tri[1], tri[2]});
+    if (std::max({tri[0], tri[1], tri[2]}) >= frame.size()) return false;
+    const int rl = int(lowest / std::uint32_t(W)), cl = int(lowest - std::uint32_t(rl) * std::uint32_t(W));
+    int r0 = rl, c0 = cl, r1 = rl, c1 = cl;
     for (std::uint32_t i : tri) {
-      if (i >= frame.size()) return false;
-      const int r = int(i / std::uint32_t(W)), c = int(i - std::uint32_t(r) * std::uint32_t(W));
+      const std::uint32_t along = std::uint32_t(cl) + (i - lowest);  // columns from the row's start
+      if (along >= 2 * std::uint32_t(W)) return false;  // two rows or more below
+      const int r = along < std::uint32_t(W) ? rl : rl + 1;
+      const int c = int(along) - (r - rl) * W;
       if (!is_pixel_centre(frame, i, r, c)) return false;
-      r0 = std::min(r0, r), r1 = std::max(r1, r), c0 = std::min(c0, c), c1 = std::max(c1, c);
+      c0 = std::min(c0, c), c1 = std::max(c1, c), r1 = std::max(r1, r);
     }
     if (r1 - r0 > 1 || c1 - c0 > 1 || r0 >= QH || c0 >= QW) return false;
     Quad& qd = p.quad[std::size_t(r0) * QW + c0];
@@ -172,18 +181,38 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     *qc0 = std::max(0, tx * kTile - 1), *qc1 = std::min(QW, (tx + 1) * kTile);
   };
   // Every triangle's levels (counted in the statistics whether or not this call evaluates it).
-  p.tris.assign(triangles.size(), GridTriangle{});
+  // Every element is written below: no zeroing pass over the whole table first (a frame of
+  // 500 x 375 has 45 MB of them, and this runs for every read of the frame).
+  p.tris.resize(triangles.size());
   std::vector<GridTriangle>& tris = p.tris;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t t = r.begin(); t != r.end(); ++t) {
-      GridTriangle& g = tris[t];
-      for (int k = 0; k < 3; ++k) g.idx[k] = triangles[t][k];
-      int lt = 0, coarsest = 0;
-      if (!insertion_levels(frame, g.idx, root, options, &lt, &coarsest)) continue;
-      g.level = std::int8_t(lt);
-      g.coarsest = std::int8_t(coarsest);
-    }
-  });
+  struct Counts {
+    std::size_t per_level[L] = {};
+  };
+  const Counts counts = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), Counts{},
+      [&](const tbb::blocked_range<std::size_t>& r, Counts c) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t) {
+          GridTriangle& g = tris[t];  // normal, P0 and own are set below where they are used
+          g.level = -1;
+          g.coarsest = 0;
+          g.ok = false;
+          for (int k = 0; k < 3; ++k) g.idx[k] = triangles[t][k];
+          int lt = 0, coarsest = 0;
+          if (!insertion_levels(frame, g.idx, root, options, &lt, &coarsest)) continue;
+          g.level = std::int8_t(lt);
+          g.coarsest = std::int8_t(coarsest);
+          ++c.per_level[lt];
+        }
+        return c;
+      },
+      [](Counts a, const Counts& b) {
+        for (int l = 0; l < L; ++l) a.per_level[l] += b.per_level[l];
+        return a;
+      });
+  for (int l = 0; l < L; ++l) {
+    p.stats.triangles += counts.per_level[l];
+    p.stats.triangles_per_level[l] += counts.per_level[l];
+  }
 
   std::vector<char> tile_active(std::size_t(TX) * TY, 1);
   std::vector<char> quad_needed;
@@ -232,11 +261,6 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       }
     }
   });
-  for (const GridTriangle& g : tris)
-    if (g.level >= 0) {
-      ++p.stats.triangles;
-      ++p.stats.triangles_per_level[g.level];
-    }
 
   // Per tile and level: bounds of the prisms of the triangles inserted there.
   p.tile_levels.assign(std::size_t(TX) * TY * L, TileLevel{});
