@@ -180,17 +180,14 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     *qr0 = std::max(0, ty * kTile - 1), *qr1 = std::min(QH, (ty + 1) * kTile);
     *qc0 = std::max(0, tx * kTile - 1), *qc1 = std::min(QW, (tx + 1) * kTile);
   };
-  // Every triangle's levels (counted in the statistics whether or not this call evaluates it).
-  // Every element is written below: no zeroing pass over the whole table first (a frame of
+  // Every triangle's levels, counted in the statistics whether or not this call evaluates it.
+  // Each element is written here, once: no zeroing pass over the whole table first (a frame of
   // 500 x 375 has 45 MB of them, and this runs for every read of the frame).
   p.tris.resize(triangles.size());
   std::vector<GridTriangle>& tris = p.tris;
-  struct Counts {
-    std::size_t per_level[L] = {};
-  };
-  const Counts counts = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), Counts{},
-      [&](const tbb::blocked_range<std::size_t>& r, Counts c) {
+  p.stats = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), IntegrateStats{},
+      [&](const tbb::blocked_range<std::size_t>& r, IntegrateStats c) {
         for (std::size_t t = r.begin(); t != r.end(); ++t) {
           GridTriangle& g = tris[t];  // normal, P0 and own are set below where they are used
           g.level = -1;
@@ -201,18 +198,15 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
           if (!insertion_levels(frame, g.idx, root, options, &lt, &coarsest)) continue;
           g.level = std::int8_t(lt);
           g.coarsest = std::int8_t(coarsest);
-          ++c.per_level[lt];
+          ++c.triangles;
+          ++c.triangles_per_level[lt];
         }
         return c;
       },
-      [](Counts a, const Counts& b) {
-        for (int l = 0; l < L; ++l) a.per_level[l] += b.per_level[l];
+      [](IntegrateStats a, const IntegrateStats& b) {
+        a.add(b);
         return a;
       });
-  for (int l = 0; l < L; ++l) {
-    p.stats.triangles += counts.per_level[l];
-    p.stats.triangles_per_level[l] += counts.per_level[l];
-  }
 
   std::vector<char> tile_active(std::size_t(TX) * TY, 1);
   std::vector<char> quad_needed;

@@ -7,7 +7,7 @@
 //   | u64 raw payload bytes | u64 stored payload bytes | u64 XXH3-64 of the stored payload
 //   | u64 XXH3-64 of the 56 header bytes before it | stored payload (LZ4 block format)
 // Version 1 tiles (FNV-1a checksums, otherwise the same) are still read: FNV-1a hashes under
-// 1 GB/s, a twentieth of XXH3, and every tile is hashed when written and again when read.
+// 1 GB/s, about a twentieth of XXH3's speed, and every tile is hashed when written and again when read.
 // The raw payload is the brick's blocks in ascending origin-key order, each as its u64 origin key
 // followed by its 2^(3k) voxels (distance, weight, colour[3], colour_weight as float32). Blocks are
 // sorted, so a brick's tile is byte-identical however its voxels were inserted.
