@@ -114,10 +114,6 @@ struct Prepared {
   std::vector<GridTriangle> tris;
   std::vector<TileLevel> tile_levels;  // [tile * L + level]
   std::vector<Vector3d> tile_normal;
-  // Per sample, for the tile bounds: camera depth and unit line of sight (a sample is a vertex
-  // of up to six triangles, each seen by up to four tiles: computed once, not per visit).
-  std::vector<double> sample_depth;
-  std::vector<Vector3d> sample_sight;
   double behind = 1;  // IntegrateOptions::behind
   IntegrateStats stats;  // triangles inserted, per level
 };
@@ -265,30 +261,6 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   p.tile_normal.assign(std::size_t(TX) * TY, Vector3d::Zero());
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
-  p.sample_depth.resize(frame.size());
-  p.sample_sight.resize(frame.size());
-  tbb::parallel_for(tbb::blocked_range<int>(0, frame.height, 8), [&](const tbb::blocked_range<int>& rows) {
-    for (int r = rows.begin(); r != rows.end(); ++r)
-      for (int c = 0; c < W; ++c) {
-        // Only the vertices of the quads this call evaluates (a sweep reads a far view once per
-        // plan tile and needs a small part of it).
-        if (!quad_needed.empty()) {
-          bool needed = false;
-          for (int qr = std::max(0, r - 1); qr <= std::min(QH - 1, r); ++qr)
-            for (int qc = std::max(0, c - 1); qc <= std::min(QW - 1, c); ++qc)
-              needed |= quad_needed[std::size_t(qr) * QW + qc] != 0;
-          if (!needed) continue;
-        }
-        const std::size_t i = std::size_t(r) * W + c;
-        const Vector3d P = frame.position[i].cast<double>();
-        p.sample_depth[i] = R.row(2).dot(P) + sensor.t.z();
-        p.sample_sight[i] = (P - centre).normalized();
-      }
-  });
-  // The ramps of a triangle of level lt inserted at level l, [l * L + lt].
-  double ramp_at[L * L] = {};
-  for (int lt = 0; lt < L; ++lt)
-    for (int l = 0; l <= lt; ++l) ramp_at[l * L + lt] = insertion_ramp(options, root, l, lt);
   tbb::parallel_for(0, TX * TY, [&](int tile) {
     if (!tile_active[tile]) return;
     TileLevel* tl = &p.tile_levels[std::size_t(tile) * L];
@@ -313,17 +285,17 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       double s_lo[3], s_hi[3];  // offset along n of each vertex, per unit ramp below and above
       double s[3];
       for (int k = 0; k < 3; ++k) {
-        const std::uint32_t i = g.idx[k];
-        const double z = p.sample_depth[i];
+        const Vector3d P = frame.position[g.idx[k]].cast<double>();
+        const double z = R.row(2).dot(P) + sensor.t.z();
         zmin = std::min(zmin, z);
         zmax = std::max(zmax, z);
-        s[k] = n.dot(frame.position[i].cast<double>());
-        const double sd = n.dot(p.sample_sight[i]);
+        s[k] = n.dot(P);
+        const double sd = n.dot((P - centre).normalized());
         s_lo[k] = std::min(-sd, options.behind * sd);
         s_hi[k] = std::max(-sd, options.behind * sd);
       }
       for (int l = g.coarsest; l <= g.level; ++l) {
-        const double ramp = ramp_at[l * L + g.level];
+        const double ramp = insertion_ramp(options, root, l, g.level);
         TileLevel& t = tl[l];
         t.zmin = std::min(t.zmin, zmin);
         t.zmax = std::max(t.zmax, zmax);
