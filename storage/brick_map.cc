@@ -256,10 +256,20 @@ std::vector<std::pair<BrickCoord, std::size_t>> BrickMap::field_bytes() const {
 
 std::vector<ManifestEntry> BrickMap::write_checkpoint() {
   if (!store_) throw std::logic_error("BrickMap::write_checkpoint without a tile store");
+  // As in spill_all: generations numbered in brick order, as writing one brick after the other
+  // would, then the tiles written in parallel (the final checkpoint of an integration writes every
+  // brick, and written one by one it was a serial tail of the stage).
+  const std::vector<Brick*> all = bricks();
+  std::vector<std::uint64_t> generation(all.size(), 0);
+  for (std::size_t i = 0; i < all.size(); ++i)
+    if (all[i]->resident && (all[i]->dirty || all[i]->generation == 0)) generation[i] = next_generation_++;
+  tbb::parallel_for(std::size_t{0}, all.size(), [&](std::size_t i) {
+    if (generation[i] != 0) write_tile_as(*all[i], generation[i]);
+  });
   std::vector<ManifestEntry> manifest;
-  for (Brick* b : bricks()) {
-    if (b->resident && (b->dirty || b->generation == 0)) write_tile_of(*b);
-    manifest.push_back({b->coord, b->generation, b->tile_bytes});
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    if (generation[i] != 0) bytes_written_ += all[i]->tile_bytes;
+    manifest.push_back({all[i]->coord, all[i]->generation, all[i]->tile_bytes});
   }
   store_->sync();
   return manifest;
