@@ -220,27 +220,32 @@ void BrickMap::spill(Brick& b) {
   ++spilled_;
 }
 
+template <class Then>
+void BrickMap::write_changed_tiles(const std::vector<Brick*>& bricks, Then&& then) {
+  std::vector<std::uint64_t> generation(bricks.size(), 0);
+  for (std::size_t i = 0; i < bricks.size(); ++i)
+    if (bricks[i]->resident && (bricks[i]->dirty || bricks[i]->generation == 0)) generation[i] = next_generation_++;
+  tbb::parallel_for(std::size_t{0}, bricks.size(), [&](std::size_t i) {
+    if (!bricks[i]->resident) return;
+    if (generation[i] != 0) {
+      write_tile_as(*bricks[i], generation[i]);
+      bytes_written_ += bricks[i]->tile_bytes;
+    }
+    then(i);
+  });
+}
+
 void BrickMap::spill_all() {
   if (!store_) throw std::logic_error("BrickMap::spill_all without a tile store");
   // No malloc_trim here: the next tile reuses the freed heap, and returning it would only make the
   // kernel clear the same pages again.
-  std::vector<Brick*> resident;
-  for (Brick* b : bricks())
-    if (b->resident) resident.push_back(b);
-  // Generations in brick order, as one spill after the other would number them; the tiles, each
-  // its own LZ4 block and file, are then written in parallel (at a plan tile's end every brick of
-  // the tile is written at once, and written one by one the other cores waited).
-  std::vector<std::uint64_t> generation(resident.size(), 0);
-  for (std::size_t i = 0; i < resident.size(); ++i)
-    if (resident[i]->dirty || resident[i]->generation == 0) generation[i] = next_generation_++;
-  tbb::parallel_for(std::size_t{0}, resident.size(), [&](std::size_t i) {
-    if (generation[i] != 0) write_tile_as(*resident[i], generation[i]);
-    release(*resident[i]);
-  });
-  for (std::size_t i = 0; i < resident.size(); ++i) {
-    if (generation[i] != 0) bytes_written_ += resident[i]->tile_bytes;
+  // At a plan tile's end every brick of the tile is written at once (written one by one, the
+  // other cores waited).
+  const std::vector<Brick*> all = bricks();
+  write_changed_tiles(all, [&](std::size_t i) {
+    release(*all[i]);
     ++spilled_;
-  }
+  });
 }
 
 std::vector<std::pair<BrickCoord, std::size_t>> BrickMap::field_bytes() const {
@@ -256,21 +261,11 @@ std::vector<std::pair<BrickCoord, std::size_t>> BrickMap::field_bytes() const {
 
 std::vector<ManifestEntry> BrickMap::write_checkpoint() {
   if (!store_) throw std::logic_error("BrickMap::write_checkpoint without a tile store");
-  // As in spill_all: generations numbered in brick order, as writing one brick after the other
-  // would, then the tiles written in parallel (the final checkpoint of an integration writes every
-  // brick, and written one by one it was a serial tail of the stage).
+  // The final checkpoint of an integration writes every brick: one by one, a serial tail.
   const std::vector<Brick*> all = bricks();
-  std::vector<std::uint64_t> generation(all.size(), 0);
-  for (std::size_t i = 0; i < all.size(); ++i)
-    if (all[i]->resident && (all[i]->dirty || all[i]->generation == 0)) generation[i] = next_generation_++;
-  tbb::parallel_for(std::size_t{0}, all.size(), [&](std::size_t i) {
-    if (generation[i] != 0) write_tile_as(*all[i], generation[i]);
-  });
+  write_changed_tiles(all, [](std::size_t) {});
   std::vector<ManifestEntry> manifest;
-  for (std::size_t i = 0; i < all.size(); ++i) {
-    if (generation[i] != 0) bytes_written_ += all[i]->tile_bytes;
-    manifest.push_back({all[i]->coord, all[i]->generation, all[i]->tile_bytes});
-  }
+  for (const Brick* b : all) manifest.push_back({b->coord, b->generation, b->tile_bytes});
   store_->sync();
   return manifest;
 }

@@ -187,6 +187,12 @@ class BrickMap {
   // Writes b's tile as generation g and drops the tile it replaces (no counters: thread-safe
   // for distinct bricks).
   void write_tile_as(Brick& b, std::uint64_t g);
+  // Writes the resident bricks of `bricks` that changed since their tile (or never had one):
+  // generations numbered in the given order, as one write after the other would number them, the
+  // tiles (each its own LZ4 block and file) written in parallel. then(i) runs for every resident
+  // brick i, after its write. Exclusive access.
+  template <class Then>
+  void write_changed_tiles(const std::vector<Brick*>& bricks, Then&& then);
   // Drops b's field from memory (no spill counter).
   void release(Brick& b);
   void spill(Brick& b);           // exclusive access
