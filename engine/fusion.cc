@@ -124,7 +124,7 @@ std::vector<SurfaceVoxel> surface_voxels(const std::vector<std::pair<VoxelKey, V
     s.key = k;
     s.distance = v.distance;
     s.weight = v.weight;
-    for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_weight > 0 ? v.colour[c] : 200.f;
+    for (int c = 0; c < 3; ++c) s.colour[c] = v.colour_share > 0 ? v.colour(c) : 200.f;
   }
   return voxels;
 }

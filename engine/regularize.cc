@@ -45,8 +45,8 @@ bool interpolate(Find&& find, VoxelKey key, CoarseSample* out) {
         if (!v) return false;
         s.distance += share * v->distance;
         s.weight += share * v->weight;
-        s.colour_weight += share * v->colour_weight;
-        for (int k = 0; k < 3; ++k) s.colour[k] += share * v->colour[k];
+        s.colour_weight += share * v->colour_weight();
+        for (int k = 0; k < 3; ++k) s.colour[k] += share * v->colour(k);
       }
   *out = s;
   return true;
@@ -71,13 +71,15 @@ void blend_level(std::vector<VoxelRef>& vox, Find&& find, const RegularizeOption
     if (interpolate(find, key, &c) && c.weight > 0) {
       const DistanceWeight b = regularize_blend({v.distance, v.weight}, {c.distance, c.weight}, tau0);
       const double k = b.weight - v.weight;  // the coarse level's share
+      float colour[3] = {v.colour(0), v.colour(1), v.colour(2)};
+      double cw = v.colour_weight();
       if (k > 0 && c.colour_weight > 0) {
-        const double cw = v.colour_weight + k;
-        for (int ch = 0; ch < 3; ++ch) v.colour[ch] = float((v.colour[ch] * v.colour_weight + c.colour[ch] * k) / cw);
-        v.colour_weight = float(cw);
+        for (int ch = 0; ch < 3; ++ch) colour[ch] = float((colour[ch] * cw + c.colour[ch] * k) / (cw + k));
+        cw += k;
       }
       v.distance = float(b.distance);
       v.weight = float(b.weight);
+      v.set_colour(colour, cw);  // the share of the new weight
       if (counted(key)) counts.blended.fetch_add(1, std::memory_order_relaxed);
     }
     if (v.weight < tau1) {

@@ -69,7 +69,9 @@ bool smaller(const TileBuffers::Mapping& m, std::size_t capacity) { return m.cap
 
 constexpr char kMagic[8] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
 constexpr std::size_t kHeaderBytes = 64;  // 56 bytes of fields + their checksum
-static_assert(sizeof(VoxelData) == 24, "tile records are six float32");
+// Bytes of one voxel in a tile: format 3 stores VoxelData's 16 bytes (two float32, four u16);
+// formats 1 and 2 stored six float32 (colour and colour weight as floats).
+constexpr std::size_t record_bytes(std::uint32_t version) { return version >= 3 ? 16 : 24; }
 
 // Little-endian field packing (the format is little-endian whatever the host).
 void put32(unsigned char* p, std::uint32_t v) {
@@ -88,6 +90,11 @@ std::uint64_t get64(const unsigned char* p) {
   for (int i = 0; i < 8; ++i) v |= std::uint64_t(p[i]) << (8 * i);
   return v;
 }
+void put16(unsigned char* p, std::uint16_t v) {
+  p[0] = static_cast<unsigned char>(v);
+  p[1] = static_cast<unsigned char>(v >> 8);
+}
+std::uint16_t get16(const unsigned char* p) { return std::uint16_t(p[0] | (p[1] << 8)); }
 void put_float(unsigned char* p, float f) {
   std::uint32_t u;
   std::memcpy(&u, &f, 4);
@@ -177,7 +184,8 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   voxels.for_each_block([&](VoxelKey o, int log, const VoxelData* d) { blocks.push_back({o, log, d}); });
   std::sort(blocks.begin(), blocks.end(), [](const BlockView& a, const BlockView& b) { return a.origin < b.origin; });
   std::size_t raw_size = 0;
-  for (const BlockView& b : blocks) raw_size += 8 + (std::size_t{1} << (3 * b.log)) * 24;
+  constexpr std::size_t kRecord = record_bytes(kTileVersion);
+  for (const BlockView& b : blocks) raw_size += 8 + (std::size_t{1} << (3 * b.log)) * kRecord;
   if (raw_size > std::size_t(LZ4_MAX_INPUT_SIZE))
     throw std::length_error(path.string() + ": brick too large for one tile (" + std::to_string(raw_size) +
                             " bytes); use a finer octree.brick_level");
@@ -187,12 +195,12 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
     put64(p, b.origin.bits);
     p += 8;
     const std::size_t n = std::size_t{1} << (3 * b.log);
-    for (std::size_t i = 0; i < n; ++i, p += 24) {
+    for (std::size_t i = 0; i < n; ++i, p += kRecord) {
       const VoxelData& v = b.data[i];
       put_float(p, v.distance);
       put_float(p + 4, v.weight);
-      for (int c = 0; c < 3; ++c) put_float(p + 8 + 4 * c, v.colour[c]);
-      put_float(p + 20, v.colour_weight);
+      for (int c = 0; c < 3; ++c) put16(p + 8 + 2 * c, v.colour_fixed[c]);
+      put16(p + 14, v.colour_share);
     }
   }
   PageBuffer stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))), pool);
@@ -272,7 +280,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
   // The version picks the checksum, so it is read before the header is known to be intact; a
   // damaged version gives the wrong checksum and fails below all the same.
   std::uint32_t version = get32(h + 8);
-  if (version != 1 && version != kTileVersion) version = kTileVersion;
+  if (version < 1 || version > kTileVersion) version = kTileVersion;
   if (get64(h + 56) != tile_checksum(version, h, 56)) throw bad("header checksum mismatch");
   if (get32(h + 8) != version)
     throw bad("format version " + std::to_string(get32(h + 8)) + ", this build reads 1 to " + std::to_string(kTileVersion));
@@ -315,16 +323,27 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
     const BrickCoord bc = brick_of(origin, brick_level);
     if (bc.x != coord.x || bc.y != coord.y || bc.z != coord.z) throw bad("block " + std::to_string(b) + " lies outside the brick");
     const std::size_t n = std::size_t{1} << (3 * block_log(level, brick_level));
-    if (std::size_t(end - p) < n * 24) throw bad("block " + std::to_string(b) + " runs past the payload");
+    const std::size_t record = record_bytes(version);
+    if (std::size_t(end - p) < n * record) throw bad("block " + std::to_string(b) + " runs past the payload");
     BlockRef ref = out.block(origin, true);
-    for (std::size_t i = 0; i < n; ++i, p += 24) {
+    for (std::size_t i = 0; i < n; ++i, p += record) {
       VoxelData& v = ref.data[i];
       v.distance = get_float(p);
       v.weight = get_float(p + 4);
-      for (int c = 0; c < 3; ++c) v.colour[c] = get_float(p + 8 + 4 * c);
-      v.colour_weight = get_float(p + 20);
-      if (!std::isfinite(v.distance) || !std::isfinite(v.weight) || !std::isfinite(v.colour_weight))
+      if (!std::isfinite(v.distance) || !std::isfinite(v.weight))
         throw bad("block " + std::to_string(b) + " holds a non-finite value");
+      if (version >= 3) {
+        for (int c = 0; c < 3; ++c) v.colour_fixed[c] = get16(p + 8 + 2 * c);
+        v.colour_share = get16(p + 14);
+      } else {
+        float colour[3];
+        for (int c = 0; c < 3; ++c) colour[c] = get_float(p + 8 + 4 * c);
+        const float colour_weight = get_float(p + 20);
+        if (!std::isfinite(colour[0]) || !std::isfinite(colour[1]) || !std::isfinite(colour[2]) ||
+            !std::isfinite(colour_weight))
+          throw bad("block " + std::to_string(b) + " holds a non-finite value");
+        v.set_colour(colour, colour_weight);
+      }
     }
   }
   if (p != end) throw bad("trailing bytes after the last block");

@@ -5,6 +5,7 @@
 
 #include "engine/fusion.h"
 #include "engine/triangulate.h"
+#include "storage/voxel_table.h"
 
 namespace sf {
 
@@ -59,6 +60,47 @@ TEST(Equations2And3, RunningWeightedMean) {
   v = accumulate(v, {0.3, 1.0});
   EXPECT_DOUBLE_EQ(v.weight, 4.0);
   EXPECT_DOUBLE_EQ(v.distance, 0.075);
+}
+
+TEST(Equations2And3, VoxelColourIsAveragedInFixedPointWithItsOwnWeight) {
+  VoxelData v;
+  const std::uint8_t c1[3] = {100, 50, 0}, c2[3] = {200, 50, 255}, black[3] = {0, 0, 0};
+  accumulate(v, 0.2f, 1.0f, c1);
+  EXPECT_FLOAT_EQ(v.distance, 0.2f);
+  EXPECT_EQ(v.weight, 1.0f);
+  EXPECT_EQ(v.colour_fixed[0], 100 * 256);
+  EXPECT_EQ(v.colour_share, VoxelData::kFullShare);
+  EXPECT_EQ(v.colour_weight(), 1.0f);  // exactly W while every contribution had colour
+  // (d, w) = (-0.1, 3): W = 4, D = (0.2 - 0.3) / 4 = -0.025; colour (100 + 600) / 4 = 175,
+  // (50 + 150) / 4 = 50, (0 + 765) / 4 = 191.25 = 48960 / 256.
+  accumulate(v, -0.1f, 3.0f, c2);
+  EXPECT_FLOAT_EQ(v.distance, -0.025f);
+  EXPECT_EQ(v.weight, 4.0f);
+  EXPECT_EQ(v.colour_fixed[0], 175 * 256);
+  EXPECT_EQ(v.colour_fixed[1], 50 * 256);
+  EXPECT_EQ(v.colour_fixed[2], 48960);
+  EXPECT_EQ(v.colour(2), 191.25f);
+  EXPECT_EQ(v.colour_weight(), 4.0f);
+  // A contribution without colour (w = 4): W = 8, the colour weight stays 4, a share of
+  // 0.5 x 65535 = 32767.5 -> 32768; the colour is unchanged.
+  accumulate(v, 0.0f, 4.0f, nullptr);
+  EXPECT_EQ(v.weight, 8.0f);
+  EXPECT_EQ(v.colour_share, 32768);
+  EXPECT_NEAR(v.colour_weight(), 4.0f, 1e-3f);
+  EXPECT_EQ(v.colour_fixed[0], 175 * 256);
+  // Then black with w = 2: Wc = 6, colour 175 x 4 / 6 = 116.67 (within one 1/256 step, the share's
+  // rounding included), W = 10, share 0.6 x 65535 = 39321.
+  accumulate(v, 0.0f, 2.0f, black);
+  EXPECT_EQ(v.weight, 10.0f);
+  EXPECT_NEAR(v.colour(0), 175.0f * 4.0f / 6.0f, 1.0f / 256.0f);
+  EXPECT_NEAR(v.colour_share, 39321, 1);
+  EXPECT_NEAR(v.colour_weight(), 6.0f, 1e-3f);
+  // Colourless voxels stay colourless (share 0), whatever their weight.
+  VoxelData g;
+  accumulate(g, 0.1f, 1.0f, nullptr);
+  accumulate(g, 0.1f, 1.0f, nullptr);
+  EXPECT_EQ(g.colour_share, 0);
+  EXPECT_EQ(g.colour_weight(), 0.0f);
 }
 
 TEST(Equations4And5, BlendWithSaturatedCoarseWeight) {

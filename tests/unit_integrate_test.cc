@@ -344,7 +344,8 @@ TEST(Integrate, VoxelCentricEnumerationEqualsPrisms) {
         ASSERT_NE(w, nullptr) << "level " << k.level() << " voxel " << k.x() << "," << k.y() << "," << k.z();
         EXPECT_EQ(v.distance, w->distance);
         EXPECT_EQ(v.weight, w->weight);
-        for (int c = 0; c < 3; ++c) EXPECT_EQ(v.colour[c], w->colour[c]);
+        for (int c = 0; c < 3; ++c) EXPECT_EQ(v.colour_fixed[c], w->colour_fixed[c]);
+        EXPECT_EQ(v.colour_share, w->colour_share);
         seen_levels.insert(k.level());
         ++compared;
       });

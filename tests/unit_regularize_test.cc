@@ -70,6 +70,42 @@ TEST(Regularize, BlendsDeletesAndRemovesDuplicates) {
   EXPECT_EQ(st.voxels_after[1] + st.voxels_after[2], 4u);
 }
 
+TEST(Regularize, BlendsColourWithTheCoarseLevelsShare) {
+  BrickMap m(1);
+  auto put_coloured = [&](VoxelKey k, float d, float w, std::uint8_t r) {
+    std::vector<Contribution> c{{k, d, w, {r, 0, 0}, true}};
+    m.apply(c);
+  };
+  put_coloured(VoxelKey::make(1, 0, 0, 0), 0.3f, 1.0f, 100);
+  put_coloured(VoxelKey::make(1, 1, 0, 0), 0.1f, 1.0f, 200);
+  put_coloured(VoxelKey::make(2, 1, 0, 0), 0.0f, 0.2f, 0);  // between the two: coarse colour 150
+  put(m, VoxelKey::make(1, 3, 0, 0), 0.3f, 1.0f);  // a colourless pair of coarse voxels
+  put(m, VoxelKey::make(1, 4, 0, 0), 0.1f, 1.0f);
+  put_coloured(VoxelKey::make(2, 7, 0, 0), 0.0f, 0.2f, 40);
+  put_coloured(VoxelKey::make(1, 6, 0, 0), 0.3f, 1.0f, 60);
+  put_coloured(VoxelKey::make(1, 7, 0, 0), 0.1f, 1.0f, 60);
+  put(m, VoxelKey::make(2, 13, 0, 0), 0.0f, 0.2f);  // a colourless fine voxel between coloured ones
+  RegularizeOptions opt;  // τ0 = 0.5, τ1 = 0.1
+  regularize(m, opt, {});
+  // k = 0.3 as above: colour (0 x 0.2 + 150 x 0.3) / 0.5 = 90, colour weight 0.5 = W.
+  const VoxelData* v = m.find(VoxelKey::make(2, 1, 0, 0));
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->colour(0), 90.0f, 1.0f / 256);
+  EXPECT_EQ(v->colour_share, VoxelData::kFullShare);
+  // A coarse level without colour leaves the colour, and its weight 0.2 becomes 0.4 of W = 0.5.
+  v = m.find(VoxelKey::make(2, 7, 0, 0));
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->weight, 0.5, 1e-6);
+  EXPECT_EQ(v->colour(0), 40.0f);
+  EXPECT_NEAR(v->colour_weight(), 0.2f, 1e-4f);
+  // A colourless voxel takes the coarse colour 60 with weight k = 0.3, a share 0.6 of W = 0.5.
+  v = m.find(VoxelKey::make(2, 13, 0, 0));
+  ASSERT_NE(v, nullptr);
+  EXPECT_EQ(v->colour(0), 60.0f);
+  EXPECT_NEAR(v->colour_share, 0.6 * 65535, 1);
+  EXPECT_NEAR(v->colour_weight(), 0.3f, 1e-4f);
+}
+
 TEST(Regularize, DuplicatesAcrossSeveralLevelsKeepTheFinest) {
   BrickMap m(0);
   put(m, VoxelKey::make(0, 1, 1, 1), 0.1f, 1.0f);

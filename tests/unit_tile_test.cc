@@ -3,7 +3,10 @@
 #include "storage/tile_file.h"
 
 #include <gtest/gtest.h>
+#include <lz4.h>
 
+#include <algorithm>
+#include <cstring>
 #include <fstream>
 #include <iterator>
 #include <random>
@@ -25,10 +28,8 @@ std::vector<std::pair<VoxelKey, VoxelData>> sample_voxels() {
     VoxelData data;
     data.distance = d;
     data.weight = w;
-    data.colour[0] = 10 * w;
-    data.colour[1] = 200;
-    data.colour[2] = d;
-    data.colour_weight = w / 2;
+    const float colour[3] = {10 * w, 200, 100 * d};
+    data.set_colour(colour, w / 2);
     v.push_back({VoxelKey::make(level, x, y, z), data});
   };
   add(2, 1, 0, 1, 0.25f, 1.5f);
@@ -82,11 +83,11 @@ TEST(Tile, RoundTripKeepsEveryVoxelAndIsIndependentOfInsertionOrder) {
     ASSERT_NE(v, nullptr);
     EXPECT_EQ(v->distance, d.distance);
     EXPECT_EQ(v->weight, d.weight);
-    for (int ch = 0; ch < 3; ++ch) EXPECT_EQ(v->colour[ch], d.colour[ch]);
-    EXPECT_EQ(v->colour_weight, d.colour_weight);
+    for (int ch = 0; ch < 3; ++ch) EXPECT_EQ(v->colour_fixed[ch], d.colour_fixed[ch]);
+    EXPECT_EQ(v->colour_share, d.colour_share);
   }
-  // Compression: 64 mostly empty 4^3 blocks of 24-byte voxels shrink well.
-  EXPECT_LT(size, 0.5 * double(a.block_count() * 64 * 24));
+  // Compression: 64 mostly empty 4^3 blocks of 16-byte voxels shrink well.
+  EXPECT_LT(size, 0.5 * double(a.block_count() * 64 * 16));
 
   VoxelTable empty(3), empty_back(3);
   write_tile(dir / "empty.tile", {0, 0, 0}, empty);
@@ -127,15 +128,125 @@ TEST(Tile, EveryFlippedByteIsDetectedAndNamesTheTile) {
 
 // A job written before checksums moved to XXH3 (tile format 1: FNV-1a, otherwise the same bytes)
 // resumes: its tiles still read. A tile of a later format is refused by name, not as damage.
-TEST(Tile, FormatOneTilesStillReadAndLaterFormatsAreRefused) {
+namespace {
+
+// A tile of format 1 or 2 (24-byte voxels: six float32), laid out here from the format's
+// description rather than by this build's writer, which writes only the current format. With
+// `colour`, every voxel's record carries that float colour and colour weight instead of its own.
+struct FloatColour {
+  float colour[3];
+  float weight;
+};
+std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const VoxelTable& t,
+                              const FloatColour* colour = nullptr) {
+  struct Block {
+    VoxelKey origin;
+    int log;
+    const VoxelData* data;
+  };
+  std::vector<Block> blocks;
+  t.for_each_block([&](VoxelKey o, int log, const VoxelData* d) { blocks.push_back({o, log, d}); });
+  std::sort(blocks.begin(), blocks.end(), [](const Block& x, const Block& y) { return x.origin < y.origin; });
+  std::vector<unsigned char> raw;
+  auto put = [](std::vector<unsigned char>& out, std::uint64_t v, int n) {
+    for (int i = 0; i < n; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
+  };
+  auto put_float = [&](float f) {
+    std::uint32_t u;
+    std::memcpy(&u, &f, 4);
+    put(raw, u, 4);
+  };
+  for (const Block& b : blocks) {
+    put(raw, b.origin.bits, 8);
+    for (std::size_t i = 0; i < (std::size_t{1} << (3 * b.log)); ++i) {
+      const VoxelData& v = b.data[i];
+      put_float(v.distance);
+      put_float(v.weight);
+      for (int c = 0; c < 3; ++c) put_float(colour ? colour->colour[c] : v.colour(c));
+      put_float(colour ? colour->weight : v.colour_weight());
+    }
+  }
+  std::vector<unsigned char> stored(std::size_t(LZ4_compressBound(int(raw.size()))));
+  stored.resize(std::size_t(LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
+                                                 reinterpret_cast<char*>(stored.data()), int(raw.size()),
+                                                 int(stored.size()))));
+  std::vector<unsigned char> h;
+  for (char c : std::string("SFTILE1\n")) h.push_back(static_cast<unsigned char>(c));
+  put(h, version, 4);
+  put(h, std::uint32_t(t.brick_level()), 4);
+  put(h, coord.x, 4);
+  put(h, coord.y, 4);
+  put(h, coord.z, 4);
+  put(h, blocks.size(), 4);
+  put(h, raw.size(), 8);
+  put(h, stored.size(), 8);
+  put(h, tile_checksum(version, stored.data(), stored.size()), 8);
+  put(h, tile_checksum(version, h.data(), 56), 8);
+  std::vector<char> out(h.begin(), h.end());
+  out.insert(out.end(), stored.begin(), stored.end());
+  return out;
+}
+
+void write_bytes(const std::filesystem::path& p, const std::vector<char>& b) {
+  std::ofstream out(p, std::ios::binary);
+  out.write(b.data(), std::streamsize(b.size()));
+}
+
+}  // namespace
+
+TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   const auto dir = scratch_dir("tile_versions");
   VoxelTable t(3);
   fill(t, sample_voxels());
-  const auto path = dir / "v2.tile";
+  const auto path = dir / "v3.tile";
   write_tile(path, {2, 0, 2}, t);
-  std::vector<char> bytes = bytes_of(path);
-  auto rewrite = [&](std::uint32_t version, std::uint64_t (*checksum)(const void*, std::size_t)) {
-    std::vector<char> b = bytes;
+  const std::vector<char> bytes = bytes_of(path);
+  EXPECT_EQ(bytes[8], 3);  // this build writes format 3
+  // Format 3's 16-byte voxels against formats 1-2's 24: the same voxels, a smaller raw payload.
+  const std::vector<char> v2 = legacy_tile(2, {2, 0, 2}, t);
+  auto raw_size = [](const std::vector<char>& b) {
+    std::uint64_t v = 0;
+    for (int i = 0; i < 8; ++i) v |= std::uint64_t(static_cast<unsigned char>(b[32 + i])) << (8 * i);
+    return v;
+  };
+  const std::uint64_t records = t.block_count() == 0 ? 0 : (raw_size(v2) - 8 * t.block_count()) / 24;
+  EXPECT_EQ(raw_size(bytes), 8 * t.block_count() + 16 * records);
+  write_bytes(dir / "v2.tile", v2);
+  write_bytes(dir / "v1.tile", legacy_tile(1, {2, 0, 2}, t));
+  for (const char* name : {"v1.tile", "v2.tile"}) {
+    SCOPED_TRACE(name);
+    VoxelTable b(3);
+    read_tile(dir / name, b);
+    EXPECT_EQ(b.live_count(), t.live_count());
+    // The colour of a float voxel comes back exact: its fixed point was written as a float.
+    for (const auto& [k, d] : sample_voxels()) {
+      const VoxelData* v = b.find(k);
+      ASSERT_NE(v, nullptr);
+      EXPECT_EQ(v->distance, d.distance);
+      EXPECT_EQ(v->weight, d.weight);
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(v->colour_fixed[c], d.colour_fixed[c]);
+      EXPECT_EQ(v->colour_share, d.colour_share);
+    }
+  }
+  // A format-2 voxel with any float colour: the nearest 1/256 step (12.3 x 256 = 3148.8 -> 3149;
+  // 300 is no colour and clamps to the largest step), and the colour weight as a share of the
+  // weight (0.5 / 2 x 65535 = 16383.75 -> 16384).
+  VoxelTable one(3);
+  const VoxelKey key = VoxelKey::make(9, 130, 5, 140);
+  one.find_or_insert(key).weight = 2.0f;
+  const FloatColour odd{{12.3f, 0.0f, 300.0f}, 0.5f};
+  write_bytes(dir / "odd.tile", legacy_tile(2, {2, 0, 2}, one, &odd));
+  VoxelTable odd_back(3);
+  read_tile(dir / "odd.tile", odd_back);
+  const VoxelData& v = *odd_back.find(key);
+  EXPECT_EQ(v.colour_fixed[0], 3149);
+  EXPECT_EQ(v.colour_fixed[1], 0);
+  EXPECT_EQ(v.colour_fixed[2], 65535);
+  EXPECT_EQ(v.colour_share, 16384);
+  EXPECT_FLOAT_EQ(v.colour_weight(), 2.0f * 16384.0f / 65535.0f);
+  EXPECT_FLOAT_EQ(v.colour(0), 3149.0f / 256.0f);
+  // Format 1 with XXH3 checksums, or format 2 with FNV-1a ones, is damage.
+  auto rewrite = [&](std::vector<char> b, std::uint32_t version, std::uint64_t (*checksum)(const void*, std::size_t)) {
     unsigned char* h = reinterpret_cast<unsigned char*>(b.data());
     auto put = [](unsigned char* p, std::uint64_t v, int n) {
       for (int i = 0; i < n; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
@@ -145,32 +256,20 @@ TEST(Tile, FormatOneTilesStillReadAndLaterFormatsAreRefused) {
     put(h + 56, checksum(h, 56), 8);
     return b;
   };
-  auto write_bytes = [](const std::filesystem::path& p, const std::vector<char>& b) {
-    std::ofstream out(p, std::ios::binary);
-    out.write(b.data(), std::streamsize(b.size()));
-  };
-  EXPECT_EQ(bytes[8], 2);  // this build writes format 2
   auto fnv = [](const void* d, std::size_t n) { return fnv1a64(d, n); };
   auto xxh3 = [](const void* d, std::size_t n) { return tile_checksum(2, d, n); };
   // The payload checksum really changed: FNV-1a and XXH3 differ on these bytes.
-  ASSERT_NE(fnv(bytes.data() + 64, bytes.size() - 64), xxh3(bytes.data() + 64, bytes.size() - 64));
-  write_bytes(dir / "v1.tile", rewrite(1, fnv));
-  VoxelTable a(3), b(3);
-  read_tile(path, a);
-  read_tile(dir / "v1.tile", b);
-  EXPECT_EQ(b.live_count(), a.live_count());
-  for (const auto& [k, d] : sample_voxels()) {
-    ASSERT_NE(b.find(k), nullptr);
-    EXPECT_EQ(b.find(k)->distance, d.distance);
-  }
-  // Format 1 with XXH3 checksums, or format 2 with FNV-1a ones, is damage.
-  write_bytes(dir / "mixed.tile", rewrite(1, xxh3));
+  ASSERT_NE(fnv(v2.data() + 64, v2.size() - 64), xxh3(v2.data() + 64, v2.size() - 64));
   VoxelTable r(3);
+  write_bytes(dir / "mixed.tile", rewrite(v2, 1, xxh3));
   expect_input_error([&] { read_tile(dir / "mixed.tile", r); }, "mixed.tile", "header checksum mismatch");
-  write_bytes(dir / "mixed2.tile", rewrite(2, fnv));
+  write_bytes(dir / "mixed2.tile", rewrite(v2, 2, fnv));
   expect_input_error([&] { read_tile(dir / "mixed2.tile", r); }, "mixed2.tile", "header checksum mismatch");
-  write_bytes(dir / "v3.tile", rewrite(3, xxh3));
-  expect_input_error([&] { read_tile(dir / "v3.tile", r); }, "v3.tile", "format version 3, this build reads 1 to 2");
+  // A format-2 payload labelled format 3 is misread as 16-byte voxels: its length gives it away.
+  write_bytes(dir / "relabelled.tile", rewrite(v2, 3, xxh3));
+  expect_input_error([&] { read_tile(dir / "relabelled.tile", r); }, "relabelled.tile", "damaged tile");
+  write_bytes(dir / "v4.tile", rewrite(bytes, 4, xxh3));
+  expect_input_error([&] { read_tile(dir / "v4.tile", r); }, "v4.tile", "format version 4, this build reads 1 to 3");
 }
 
 TEST(Tile, TruncationWrongMagicAndWrongBrickLevelAreRefused) {
@@ -243,7 +342,9 @@ TEST(Tile, ReusedBuffersChangeNoByteOfATile) {
     for (std::uint32_t y = 0; y < 64; ++y)
       for (std::uint32_t z = 128; z < 192; ++z) {
         VoxelData& v = large.find_or_insert(VoxelKey::make(9, x, y, z));
-        v.distance = u(rng), v.weight = u(rng), v.colour_weight = u(rng);
+        v.distance = u(rng), v.weight = u(rng);
+        for (std::uint16_t& c : v.colour_fixed) c = std::uint16_t(rng());
+        v.colour_share = std::uint16_t(rng());
       }
   fill(small, sample_voxels());
   TileBuffers pool(std::size_t{64} << 20);
