@@ -23,9 +23,9 @@
 namespace sf {
 
 // The hSDF sample of one voxel: cumulative weighted averages (equations 2-3 of the paper), in 16
-// bytes. Integration's cost is mostly memory (every voxel is fresh memory once, and the whole field
-// is compressed into tiles at each checkpoint), so colour, the one field whose precision output
-// does not need, is kept in fixed point: 24-byte records cost 10-20 % more integration time, 50 % more
+// bytes. Integration's cost is mostly memory (every voxel is fresh memory once, and the whole
+// field is compressed into tiles at each checkpoint), so colour, whose float precision no output
+// needs, is kept in fixed point: 24-byte voxels cost 10-20 % more integration time and 50 % more
 // field and tile bytes (bench/README.md, session 29).
 struct VoxelData {
   static constexpr float kColourUnit = 256.0f;  // colour_fixed units per colour step
