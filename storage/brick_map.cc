@@ -215,7 +215,7 @@ void BrickMap::enforce_limit() {
 }
 
 void BrickMap::spill(Brick& b) {
-  if (b.dirty || b.generation == 0) write_tile_of(b);
+  if (b.needs_tile()) write_tile_of(b);
   release(b);
   ++spilled_;
 }
@@ -224,7 +224,7 @@ template <class Then>
 void BrickMap::write_changed_tiles(const std::vector<Brick*>& bricks, Then&& then) {
   std::vector<std::uint64_t> generation(bricks.size(), 0);
   for (std::size_t i = 0; i < bricks.size(); ++i)
-    if (bricks[i]->resident && (bricks[i]->dirty || bricks[i]->generation == 0)) generation[i] = next_generation_++;
+    if (bricks[i]->resident && bricks[i]->needs_tile()) generation[i] = next_generation_++;
   tbb::parallel_for(std::size_t{0}, bricks.size(), [&](std::size_t i) {
     if (!bricks[i]->resident) return;
     if (generation[i] != 0) {
@@ -261,7 +261,8 @@ std::vector<std::pair<BrickCoord, std::size_t>> BrickMap::field_bytes() const {
 
 std::vector<ManifestEntry> BrickMap::write_checkpoint() {
   if (!store_) throw std::logic_error("BrickMap::write_checkpoint without a tile store");
-  // The final checkpoint of an integration writes every brick: one by one, a serial tail.
+  // The final checkpoint of an integration writes every brick, so in parallel (written one by
+  // one they were a serial tail of the stage).
   const std::vector<Brick*> all = bricks();
   write_changed_tiles(all, [](std::size_t) {});
   std::vector<ManifestEntry> manifest;

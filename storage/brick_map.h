@@ -76,6 +76,9 @@ struct Brick {
   std::uint64_t tile_bytes = 0;          // size of tile `generation`
   std::uint64_t field_bytes = 0;         // memory it held when last resident (0: unknown)
   std::uint64_t last_use = 0;            // epoch of the last access (least recently used spills first)
+
+  // Its voxels differ from its newest tile, or it has none: spilling or a checkpoint writes it.
+  bool needs_tile() const { return dirty || generation == 0; }
 };
 
 class TileStore;
