@@ -2,11 +2,12 @@
 # Integration of two binaries compared on one input, runs alternating (A B A B ...), so that the
 # ratios hold on a noisy machine. Each run is a fresh `fuse --integrate-only` job; per binary it
 # prints the medians of wall time, the bounds / plan / integrate stages (from --stats), minor page
-# faults and peak RSS, and whether the two binaries' tiles are byte-identical (sha256 of all).
+# faults and peak RSS, and whether the two binaries' tiles are byte-identical (sha256 of each
+# brick's tile; the generation numbers in tile names follow the plan's order and are left out).
 # Usage: bench/integrate_ab.sh INPUT CONFIG RUNS BIN_A BIN_B [fuse args...]
 #   e.g. bench/integrate_ab.sh ../shared/data/7scenes_50frames configs/rgbd.toml 3 old/scalefuse build/bin/scalefuse --memory-limit 1.5G
 set -euo pipefail
-[ $# -ge 5 ] || { sed -n 2,7p "$0" >&2; exit 2; }
+[ $# -ge 5 ] || { sed -n 2,8p "$0" >&2; exit 2; }
 INPUT=$1 CONFIG=$2 RUNS=$3 A=$4 B=$5
 shift 5
 WORK=$(mktemp -d /tmp/scalefuse-ab.XXXXXX)
@@ -18,7 +19,7 @@ for i in $(seq "$RUNS"); do
     rm -rf "$WORK/job"
     /usr/bin/time -f "%e %R %M" -o "$WORK/time" "$bin" fuse "$INPUT" --config "$CONFIG" -o "$WORK/m.ply" \
       --job "$WORK/job" --integrate-only --stats "$WORK/stats.json" -q "$@" > /dev/null
-    tiles=$(cd "$WORK/job/tiles" && sha256sum -- * | sha256sum | cut -c1-16)
+    tiles=$(cd "$WORK/job/tiles" && sha256sum -- * | sed -E 's/\.[0-9]+\.tile$//' | sort | sha256sum | cut -c1-16)
     python3 - "$WORK" "$side" "$tiles" >> "$WORK/runs" <<'PY'
 import json, sys
 work, side, tiles = sys.argv[1:4]

@@ -6,11 +6,12 @@
 # core was at times 25-30 % slower than the other for minutes on end; two copies of one binary
 # gave swapped-pair means within 1.5 % of 1. Use 6 pairs or more and read the median.
 # Prints per pair the integrate seconds (from --stats) and ratio B/A, then the median over pairs
-# of the swapped-pair geometric means, and whether the binaries' tiles are byte-identical.
+# of the swapped-pair geometric means, and whether the binaries' tiles are byte-identical (per
+# brick; the generation numbers in tile names are left out).
 # Usage: bench/pair_ab.sh INPUT CONFIG PAIRS BIN_A BIN_B [fuse args...]   (PAIRS even)
 #   e.g. bench/pair_ab.sh /work/q/igea configs/mvs.toml 6 old/scalefuse build/bin/scalefuse
 set -euo pipefail
-[ $# -ge 5 ] || { sed -n 2,11p "$0" >&2; exit 2; }
+[ $# -ge 5 ] || { sed -n 2,12p "$0" >&2; exit 2; }
 INPUT=$1 CONFIG=$2 PAIRS=$3 A=$4 B=$5
 shift 5
 EXTRA=("$@")
@@ -30,8 +31,8 @@ for i in $(seq "$PAIRS"); do
   pb=$!
   wait $pa
   wait $pb
-  ta=$(cd "$WORK/a/tiles" && sha256sum -- * | sha256sum | cut -c1-16)
-  tb=$(cd "$WORK/b/tiles" && sha256sum -- * | sha256sum | cut -c1-16)
+  ta=$(cd "$WORK/a/tiles" && sha256sum -- * | sed -E 's/\.[0-9]+\.tile$//' | sort | sha256sum | cut -c1-16)
+  tb=$(cd "$WORK/b/tiles" && sha256sum -- * | sed -E 's/\.[0-9]+\.tile$//' | sort | sha256sum | cut -c1-16)
   python3 - "$WORK" "$ca" "$ta" "$tb" >> "$WORK/pairs" <<'PY'
 import json, sys
 work, core_a, ta, tb = sys.argv[1:5]
