@@ -19,7 +19,7 @@ for i in $(seq "$RUNS"); do
     rm -rf "$WORK/job"
     /usr/bin/time -f "%e %R %M" -o "$WORK/time" "$bin" fuse "$INPUT" --config "$CONFIG" -o "$WORK/m.ply" \
       --job "$WORK/job" --integrate-only --stats "$WORK/stats.json" -q "$@" > /dev/null
-    tiles=$(cd "$WORK/job/tiles" && sha256sum -- * | sed -E 's/\.[0-9]+\.tile$//' | sort | sha256sum | cut -c1-16)
+    tiles=$("$(dirname "$0")/tiles_hash.sh" "$WORK/job/tiles")
     python3 - "$WORK" "$side" "$tiles" >> "$WORK/runs" <<'PY'
 import json, sys
 work, side, tiles = sys.argv[1:4]

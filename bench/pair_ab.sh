@@ -31,8 +31,8 @@ for i in $(seq "$PAIRS"); do
   pb=$!
   wait $pa
   wait $pb
-  ta=$(cd "$WORK/a/tiles" && sha256sum -- * | sed -E 's/\.[0-9]+\.tile$//' | sort | sha256sum | cut -c1-16)
-  tb=$(cd "$WORK/b/tiles" && sha256sum -- * | sed -E 's/\.[0-9]+\.tile$//' | sort | sha256sum | cut -c1-16)
+  ta=$("$(dirname "$0")/tiles_hash.sh" "$WORK/a/tiles")
+  tb=$("$(dirname "$0")/tiles_hash.sh" "$WORK/b/tiles")
   python3 - "$WORK" "$ca" "$ta" "$tb" >> "$WORK/pairs" <<'PY'
 import json, sys
 work, core_a, ta, tb = sys.argv[1:5]

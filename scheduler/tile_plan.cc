@@ -12,13 +12,14 @@ namespace sf {
 std::vector<std::pair<BrickCoord, double>> estimate_brick_bytes(
     const std::vector<VoxelKey>& cells, int brick_level, const IntegrateOptions& options,
     const std::vector<std::pair<BrickCoord, std::size_t>>& existing, const std::vector<std::uint64_t>& touched) {
-  // Live voxels cost about 35 bytes with their block and index share (16-byte voxels, blocks about
-  // half full; docs/architecture.md). The tents leave the ramps' ends empty and blocks are shared:
-  // measured fields are about 0.3 of this count, so the estimate is 1.25x the city block's field,
-  // 1.36x igea's and 0.9x the bunny scans'. At the 52 bytes of 24-byte voxels it was 1.86x the
-  // city's and 2.0x igea's field, and tiles used half the budget: igea under a 150 MB limit swept
-  // 9 tiles instead of 5, its integration 1.14x as long (bench/README.md, session 30).
-  const double bytes_per_cell = 0.3 * 8.0 * 8.0 * 1.5 * ((1.0 + options.behind) * options.gamma) * 35.0;
+  // A live voxel costs about 35 bytes with its share of its block (16-byte voxels, blocks about
+  // half full) and of the block index. The tents leave the ramps' ends empty and blocks are
+  // shared: measured fields are about 0.3 of this count. Together the estimate is 1.25x the city
+  // block's field, 1.36x igea's and 0.9x the bunny scans' (bench/README.md, session 30): tight
+  // enough that tiles use the budget, since every extra tile re-reads the depth maps reaching it.
+  constexpr double kBytesPerLiveVoxel = 35.0, kMeasuredShare = 0.3;
+  const double bytes_per_cell =
+      kMeasuredShare * 8.0 * 8.0 * 1.5 * ((1.0 + options.behind) * options.gamma) * kBytesPerLiveVoxel;
   std::map<std::uint64_t, std::pair<BrickCoord, double>> by_brick;
   for (VoxelKey k : cells) {
     const BrickCoord c = brick_of(k, brick_level);

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <set>
 
 #include "engine/depth_frame.h"
@@ -104,6 +105,29 @@ TEST(BrickBox, ExtendHoldsEveryBrickAndMeetsNeedsASharedBrick) {
   EXPECT_FALSE(box.meets(BrickBox{{4, 0, 0}, {9, 9, 9}}));
   EXPECT_FALSE(box.meets(BrickBox{{0, 0, 5}, {9, 9, 9}}));
   EXPECT_FALSE(box.meets(BrickBox{}));
+}
+
+TEST(TilePlan, EstimatesBrickBytesFromSurfaceCells) {
+  // Per surface cell: 0.3 x (8 x 8 x 1.5 level-l cells) x (1 + 0.5) x 8 ramp cells x 35 bytes
+  // = 0.3 x 96 x 12 x 35 = 12096 bytes (mvs preset: gamma 8, behind 0.5).
+  IntegrateOptions o;
+  o.gamma = 8;
+  o.behind = 0.5;
+  const int brick_level = 3;  // a level-8 brick spans 32 voxels per axis
+  const std::vector<VoxelKey> cells = {VoxelKey::make(8, 1, 1, 1), VoxelKey::make(8, 2, 1, 1),
+                                       VoxelKey::make(8, 40, 1, 1)};
+  const auto estimate = estimate_brick_bytes(cells, brick_level, o, {{BrickCoord{0, 0, 0}, 1000}},
+                                             {BrickCoord{2, 0, 0}.packed()});
+  ASSERT_EQ(estimate.size(), 3u);
+  std::map<std::uint32_t, double> by_x;
+  for (const auto& [c, bytes] : estimate) {
+    EXPECT_EQ(c.y, 0u);
+    EXPECT_EQ(c.z, 0u);
+    by_x[c.x] = bytes;
+  }
+  EXPECT_NEAR(by_x.at(0), 2 * 12096.0 + 1000, 1e-6);  // two cells and the bytes it already holds
+  EXPECT_NEAR(by_x.at(1), 12096.0, 1e-6);
+  EXPECT_EQ(by_x.at(2), 0.0);  // reached, but no surface cell: listed with nothing
 }
 
 TEST(TilePlan, CutsTheLongestAxisAtTheWeightedMedian) {
