@@ -114,6 +114,10 @@ struct Prepared {
   std::vector<GridTriangle> tris;
   std::vector<TileLevel> tile_levels;  // [tile * L + level]
   std::vector<Vector3d> tile_normal;
+  // Per sample (a vertex of up to six triangles, each in the bounds of up to four tiles): camera
+  // depth and unit line of sight, computed once rather than per triangle and tile.
+  std::vector<double> depth;
+  std::vector<Vector3d> sight;
   double behind = 1;  // IntegrateOptions::behind
   IntegrateStats stats;  // triangles inserted, per level
 };
@@ -261,6 +265,29 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   p.tile_normal.assign(std::size_t(TX) * TY, Vector3d::Zero());
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
+  const int H = frame.height;
+  p.depth.resize(frame.size());
+  p.sight.resize(frame.size());
+  tbb::parallel_for(tbb::blocked_range<int>(0, H, 16), [&](const tbb::blocked_range<int>& rows) {
+    for (int r = rows.begin(); r != rows.end(); ++r)
+      for (int c = 0; c < W; ++c) {
+        if (!quad_needed.empty()) {  // a sample is a vertex of the quads up and left of it
+          bool needed = false;
+          for (int qr = std::max(r - 1, 0); qr <= std::min(r, QH - 1); ++qr)
+            for (int qc = std::max(c - 1, 0); qc <= std::min(c, QW - 1); ++qc)
+              needed = needed || quad_needed[std::size_t(qr) * QW + qc];
+          if (!needed) continue;
+        }
+        const std::size_t i = std::size_t(r) * W + c;
+        const Vector3d P = frame.position[i].cast<double>();
+        p.depth[i] = R.row(2).dot(P) + sensor.t.z();
+        p.sight[i] = (P - centre).normalized();
+      }
+  });
+  // Ramps by (level of the triangle, insertion level).
+  double ramp_table[L][L];
+  for (int lt = 0; lt < L; ++lt)
+    for (int l = 0; l <= lt; ++l) ramp_table[lt][l] = insertion_ramp(options, root, l, lt);
   tbb::parallel_for(0, TX * TY, [&](int tile) {
     if (!tile_active[tile]) return;
     TileLevel* tl = &p.tile_levels[std::size_t(tile) * L];
@@ -285,17 +312,17 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       double s_lo[3], s_hi[3];  // offset along n of each vertex, per unit ramp below and above
       double s[3];
       for (int k = 0; k < 3; ++k) {
-        const Vector3d P = frame.position[g.idx[k]].cast<double>();
-        const double z = R.row(2).dot(P) + sensor.t.z();
+        const std::uint32_t i = g.idx[k];
+        const double z = p.depth[i];
         zmin = std::min(zmin, z);
         zmax = std::max(zmax, z);
-        s[k] = n.dot(P);
-        const double sd = n.dot((P - centre).normalized());
+        s[k] = n.dot(frame.position[i].cast<double>());
+        const double sd = n.dot(p.sight[i]);
         s_lo[k] = std::min(-sd, options.behind * sd);
         s_hi[k] = std::max(-sd, options.behind * sd);
       }
       for (int l = g.coarsest; l <= g.level; ++l) {
-        const double ramp = insertion_ramp(options, root, l, g.level);
+        const double ramp = ramp_table[g.level][l];
         TileLevel& t = tl[l];
         t.zmin = std::min(t.zmin, zmin);
         t.zmax = std::max(t.zmax, zmax);
