@@ -7,6 +7,7 @@
 #include <xxhash.h>
 
 #include <algorithm>
+#include <bit>
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -69,9 +70,16 @@ bool smaller(const TileBuffers::Mapping& m, std::size_t capacity) { return m.cap
 
 constexpr char kMagic[8] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
 constexpr std::size_t kHeaderBytes = 64;  // 56 bytes of fields + their checksum
-// Bytes of one voxel in a tile: format 3 stores VoxelData's 16 bytes (two float32, four u16);
-// formats 1 and 2 stored six float32 (colour and colour weight as floats).
+// LZ4's acceleration: on the present voxels of igea's field, 4 compressed 1.8x faster than 1 for
+// 2.5 % more bytes (a checkpoint compresses the whole field; bench/README.md, session 31).
+constexpr int kAcceleration = 4;
+// Bytes of one voxel in a tile: formats 3 and 4 store VoxelData's 16 bytes (two float32, four
+// u16); formats 1 and 2 stored six float32 (colour and colour weight as floats).
 constexpr std::size_t record_bytes(std::uint32_t version) { return version >= 3 ? 16 : 24; }
+// From format 4 a block stores a mask of its present voxels (weight != 0) and only their records:
+// about half of a block's voxels are absent, and compressing their zeros took a third of LZ4's
+// time at a checkpoint (bench/README.md, session 31).
+constexpr bool stores_presence(std::uint32_t version) { return version >= 4; }
 
 // Little-endian field packing (the format is little-endian whatever the host).
 void put32(unsigned char* p, std::uint32_t v) {
@@ -183,20 +191,30 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   std::vector<BlockView> blocks;
   voxels.for_each_block([&](VoxelKey o, int log, const VoxelData* d) { blocks.push_back({o, log, d}); });
   std::sort(blocks.begin(), blocks.end(), [](const BlockView& a, const BlockView& b) { return a.origin < b.origin; });
+  // Per block its presence mask (a block holds at most 64 voxels).
+  static_assert(3 * kMaxBlockLog <= 6, "a block's presence mask is one u64");
+  std::vector<std::uint64_t> present(blocks.size(), 0);
   std::size_t raw_size = 0;
   constexpr std::size_t kRecord = record_bytes(kTileVersion);
-  for (const BlockView& b : blocks) raw_size += 8 + (std::size_t{1} << (3 * b.log)) * kRecord;
+  for (std::size_t j = 0; j < blocks.size(); ++j) {
+    const std::size_t n = std::size_t{1} << (3 * blocks[j].log);
+    std::uint64_t mask = 0;
+    for (std::size_t i = 0; i < n; ++i)
+      if (blocks[j].data[i].weight != 0) mask |= std::uint64_t{1} << i;
+    present[j] = mask;
+    raw_size += 16 + std::size_t(std::popcount(mask)) * kRecord;
+  }
   if (raw_size > std::size_t(LZ4_MAX_INPUT_SIZE))
     throw std::length_error(path.string() + ": brick too large for one tile (" + std::to_string(raw_size) +
                             " bytes); use a finer octree.brick_level");
   PageBuffer raw(raw_size, pool);
   unsigned char* p = raw.data();
-  for (const BlockView& b : blocks) {
-    put64(p, b.origin.bits);
-    p += 8;
-    const std::size_t n = std::size_t{1} << (3 * b.log);
-    for (std::size_t i = 0; i < n; ++i, p += kRecord) {
-      const VoxelData& v = b.data[i];
+  for (std::size_t j = 0; j < blocks.size(); ++j) {
+    put64(p, blocks[j].origin.bits);
+    put64(p + 8, present[j]);
+    p += 16;
+    for (std::uint64_t m = present[j]; m != 0; m &= m - 1, p += kRecord) {
+      const VoxelData& v = blocks[j].data[std::countr_zero(m)];
       put_float(p, v.distance);
       put_float(p + 4, v.weight);
       for (int c = 0; c < 3; ++c) put16(p + 8 + 2 * c, v.colour_fixed[c]);
@@ -205,9 +223,10 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   }
   PageBuffer stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))), pool);
   const int packed = raw_size == 0 ? 0
-                                   : LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
-                                                          reinterpret_cast<char*>(stored.data() + kHeaderBytes),
-                                                          int(raw_size), int(stored.size() - kHeaderBytes));
+                                   : LZ4_compress_fast(reinterpret_cast<const char*>(raw.data()),
+                                                       reinterpret_cast<char*>(stored.data() + kHeaderBytes),
+                                                       int(raw_size), int(stored.size() - kHeaderBytes),
+                                                       kAcceleration);
   if (raw_size > 0 && packed <= 0) throw std::runtime_error(path.string() + ": LZ4 compression failed");
   unsigned char* h = stored.data();
   std::memcpy(h, kMagic, 8);
@@ -323,15 +342,25 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
     const BrickCoord bc = brick_of(origin, brick_level);
     if (bc.x != coord.x || bc.y != coord.y || bc.z != coord.z) throw bad("block " + std::to_string(b) + " lies outside the brick");
     const std::size_t n = std::size_t{1} << (3 * block_log(level, brick_level));
+    const std::uint64_t all = n == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << n) - 1;
+    std::uint64_t present = all;
+    if (stores_presence(version)) {
+      if (end - p < 8) throw bad("block " + std::to_string(b) + " runs past the payload");
+      present = get64(p);
+      p += 8;
+      if ((present & ~all) != 0) throw bad("block " + std::to_string(b) + " marks voxels beyond its size");
+    }
     const std::size_t record = record_bytes(version);
-    if (std::size_t(end - p) < n * record) throw bad("block " + std::to_string(b) + " runs past the payload");
+    if (std::size_t(end - p) < std::size_t(std::popcount(present)) * record)
+      throw bad("block " + std::to_string(b) + " runs past the payload");
     BlockRef ref = out.block(origin, true);
-    for (std::size_t i = 0; i < n; ++i, p += record) {
-      VoxelData& v = ref.data[i];
+    for (std::uint64_t m = present; m != 0; m &= m - 1, p += record) {
+      VoxelData& v = ref.data[std::countr_zero(m)];
       v.distance = get_float(p);
       v.weight = get_float(p + 4);
       if (!std::isfinite(v.distance) || !std::isfinite(v.weight))
         throw bad("block " + std::to_string(b) + " holds a non-finite value");
+      if (stores_presence(version) && v.weight == 0) throw bad("block " + std::to_string(b) + " stores an absent voxel");
       if (version >= 3) {
         for (int c = 0; c < 3; ++c) v.colour_fixed[c] = get16(p + 8 + 2 * c);
         v.colour_share = get16(p + 14);

@@ -6,13 +6,15 @@
 //   magic "SFTILE1\n" | u32 version | u32 brick_level | u32 brick x, y, z | u32 block count
 //   | u64 raw payload bytes | u64 stored payload bytes | u64 XXH3-64 of the stored payload
 //   | u64 XXH3-64 of the 56 header bytes before it | stored payload (LZ4 block format)
-// The raw payload is the brick's blocks in ascending origin-key order, each as its u64 origin key
-// followed by its 2^(3k) voxels of 16 bytes (distance, weight as float32; colour[3] in 1/256 steps
+// The raw payload is the brick's blocks in ascending origin-key order, each as its u64 origin key,
+// a u64 mask of its present voxels (weight != 0; bit i for voxel i of its 2^(3k), x fastest) and
+// the present voxels' records of 16 bytes (distance, weight as float32; colour[3] in 1/256 steps
 // and the colour share in 1/65535 of the weight as u16; see VoxelData). Blocks are sorted, so a
 // brick's tile is byte-identical however its voxels were inserted.
-// Older formats are still read: version 2 stored 24-byte voxels (distance, weight, colour[3],
-// colour weight as float32), version 1 also checksummed with FNV-1a, which hashes under 1 GB/s,
-// about a twentieth of XXH3's speed (every tile is hashed when written and again when read).
+// Older formats are still read: version 3 stored every voxel of a block, absent ones as zeros;
+// version 2 stored 24-byte voxels (distance, weight, colour[3], colour weight as float32), version
+// 1 also checksummed with FNV-1a, which hashes under 1 GB/s, about a twentieth of XXH3's speed
+// (every tile is hashed when written and again when read).
 //
 // Writes go to a temporary name in the same directory, are fsynced and renamed over the target
 // (and the directory is fsynced), so a tile is either the old one or the new one after a crash;
@@ -30,9 +32,9 @@
 
 namespace sf {
 
-inline constexpr std::uint32_t kTileVersion = 3;
+inline constexpr std::uint32_t kTileVersion = 4;
 
-// The checksum of a tile of format `version` (1 to 3) over `size` bytes.
+// The checksum of a tile of format `version` (1 to 4) over `size` bytes.
 std::uint64_t tile_checksum(std::uint32_t version, const void* data, std::size_t size);
 
 // Page-mapped buffers for tiles' raw and compressed images, kept for reuse up to a byte budget.

@@ -130,9 +130,13 @@ TEST(Tile, EveryFlippedByteIsDetectedAndNamesTheTile) {
 // resumes: its tiles still read. A tile of a later format is refused by name, not as damage.
 namespace {
 
-// A tile of format 1 or 2 (24-byte voxels: six float32), laid out here from the format's
-// description rather than by this build's writer, which writes only the current format. With
-// `colour`, every voxel's record carries that float colour and colour weight instead of its own.
+// A tile of format 1 or 2 (24-byte voxels: six float32) or 3 (every voxel of a block in 16 bytes),
+// laid out here from the format's description rather than by this build's writer, which writes
+// only the current format. With `colour`, every voxel's record of format 1-2 carries that float
+// colour and colour weight instead of its own.
+std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
+                            const std::vector<unsigned char>& raw);
+
 struct FloatColour {
   float colour[3];
   float weight;
@@ -162,10 +166,24 @@ std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const Vox
       const VoxelData& v = b.data[i];
       put_float(v.distance);
       put_float(v.weight);
+      if (version == 3) {
+        for (int c = 0; c < 3; ++c) put(raw, v.colour_fixed[c], 2);
+        put(raw, v.colour_share, 2);
+        continue;
+      }
       for (int c = 0; c < 3; ++c) put_float(colour ? colour->colour[c] : v.colour(c));
       put_float(colour ? colour->weight : v.colour_weight());
     }
   }
+  return wrap_tile(version, coord, t.brick_level(), blocks.size(), raw);
+}
+
+// A tile of format `version` around the raw payload `raw` (LZ4, sizes, checksums all valid).
+std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
+                            const std::vector<unsigned char>& raw) {
+  auto put = [](std::vector<unsigned char>& out, std::uint64_t v, int n) {
+    for (int i = 0; i < n; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
+  };
   std::vector<unsigned char> stored(std::size_t(LZ4_compressBound(int(raw.size()))));
   stored.resize(std::size_t(LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
                                                  reinterpret_cast<char*>(stored.data()), int(raw.size()),
@@ -173,11 +191,11 @@ std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const Vox
   std::vector<unsigned char> h;
   for (char c : std::string("SFTILE1\n")) h.push_back(static_cast<unsigned char>(c));
   put(h, version, 4);
-  put(h, std::uint32_t(t.brick_level()), 4);
+  put(h, std::uint32_t(brick_level), 4);
   put(h, coord.x, 4);
   put(h, coord.y, 4);
   put(h, coord.z, 4);
-  put(h, blocks.size(), 4);
+  put(h, block_count, 4);
   put(h, raw.size(), 8);
   put(h, stored.size(), 8);
   put(h, tile_checksum(version, stored.data(), stored.size()), 8);
@@ -198,22 +216,29 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   const auto dir = scratch_dir("tile_versions");
   VoxelTable t(3);
   fill(t, sample_voxels());
-  const auto path = dir / "v3.tile";
+  const auto path = dir / "v4.tile";
   write_tile(path, {2, 0, 2}, t);
   const std::vector<char> bytes = bytes_of(path);
-  EXPECT_EQ(bytes[8], 3);  // this build writes format 3
-  // Format 3's 16-byte voxels against formats 1-2's 24: the same voxels, a smaller raw payload.
+  EXPECT_EQ(bytes[8], 4);  // this build writes format 4
+  // Format 3's 16-byte voxels against formats 1-2's 24: the same voxels, a smaller raw payload;
+  // format 4 keeps the present voxels only, behind a u64 mask per block.
   const std::vector<char> v2 = legacy_tile(2, {2, 0, 2}, t);
+  const std::vector<char> v3 = legacy_tile(3, {2, 0, 2}, t);
   auto raw_size = [](const std::vector<char>& b) {
     std::uint64_t v = 0;
     for (int i = 0; i < 8; ++i) v |= std::uint64_t(static_cast<unsigned char>(b[32 + i])) << (8 * i);
     return v;
   };
   const std::uint64_t records = t.block_count() == 0 ? 0 : (raw_size(v2) - 8 * t.block_count()) / 24;
-  EXPECT_EQ(raw_size(bytes), 8 * t.block_count() + 16 * records);
+  EXPECT_EQ(raw_size(v3), 8 * t.block_count() + 16 * records);
+  // Blocks: one at level 2 (1 voxel), one at level 4 (2^3), and at level 9 the 4^3 blocks the 61
+  // voxels fall in; 64 voxels are present, far fewer than the records of format 3.
+  EXPECT_EQ(raw_size(bytes), 16 * t.block_count() + 16 * sample_voxels().size());
+  EXPECT_LT(raw_size(bytes), raw_size(v3) / 4);
+  write_bytes(dir / "v3.tile", v3);
   write_bytes(dir / "v2.tile", v2);
   write_bytes(dir / "v1.tile", legacy_tile(1, {2, 0, 2}, t));
-  for (const char* name : {"v1.tile", "v2.tile"}) {
+  for (const char* name : {"v1.tile", "v2.tile", "v3.tile", "v4.tile"}) {
     SCOPED_TRACE(name);
     VoxelTable b(3);
     read_tile(dir / name, b);
@@ -268,8 +293,85 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   // A format-2 payload labelled format 3 is misread as 16-byte voxels: its length gives it away.
   write_bytes(dir / "relabelled.tile", rewrite(v2, 3, xxh3));
   expect_input_error([&] { read_tile(dir / "relabelled.tile", r); }, "relabelled.tile", "damaged tile");
-  write_bytes(dir / "v4.tile", rewrite(bytes, 4, xxh3));
-  expect_input_error([&] { read_tile(dir / "v4.tile", r); }, "v4.tile", "format version 4, this build reads 1 to 3");
+  // A format-3 payload labelled format 4 reads its first voxel as a presence mask: refused.
+  write_bytes(dir / "relabelled3.tile", rewrite(v3, 4, xxh3));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "relabelled3.tile", fresh);
+  }, "relabelled3.tile", "damaged tile");
+  write_bytes(dir / "v5.tile", rewrite(bytes, 5, xxh3));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "v5.tile", fresh);
+  }, "v5.tile", "format version 5, this build reads 1 to 4");
+}
+
+// Format 4 stores a mask of the present voxels per block: erased voxels (weight < 0) are present
+// and come back; absent ones (weight 0) are left out and read back as zeros; a mask that marks a
+// voxel beyond the block, or a stored record with weight 0, is damage.
+TEST(Tile, PresenceMaskKeepsErasedVoxelsAndRefusesImpossibleMasks) {
+  const auto dir = scratch_dir("tile_presence");
+  VoxelTable t(3);
+  const VoxelKey live = VoxelKey::make(9, 130, 5, 140), erased = VoxelKey::make(9, 131, 5, 140),
+                 absent = VoxelKey::make(9, 128, 5, 140);
+  t.find_or_insert(live) = VoxelData{0.5f, 2.0f, {256, 512, 768}, 65535};
+  t.find_or_insert(erased).weight = -1.0f;
+  t.find_or_insert(absent).distance = 7.0f;  // weight 0: absent, whatever else it holds
+  write_tile(dir / "t.tile", {2, 0, 2}, t);
+  VoxelTable back(3);
+  read_tile(dir / "t.tile", back);
+  ASSERT_EQ(back.block_count(), 1u);
+  EXPECT_EQ(back.find(live)->distance, 0.5f);
+  EXPECT_EQ(back.find(live)->colour_fixed[2], 768);
+  EXPECT_EQ(back.find(erased)->weight, -1.0f);
+  EXPECT_EQ(back.find(absent), nullptr);
+  EXPECT_EQ(back.find_or_insert(absent).distance, 0.0f);
+
+  // One 4^3 block of level 9 at origin (128, 4, 140): voxel 2 + 4 * 1 + 16 * 0 = 6 is (130, 5, 140).
+  auto raw_of = [](std::uint64_t origin, std::uint64_t mask, const std::vector<VoxelData>& records) {
+    std::vector<unsigned char> raw;
+    auto put = [&](std::uint64_t v, int n) {
+      for (int i = 0; i < n; ++i) raw.push_back(static_cast<unsigned char>(v >> (8 * i)));
+    };
+    put(origin, 8);
+    put(mask, 8);
+    for (const VoxelData& v : records) {
+      std::uint32_t u;
+      std::memcpy(&u, &v.distance, 4);
+      put(u, 4);
+      std::memcpy(&u, &v.weight, 4);
+      put(u, 4);
+      for (int c = 0; c < 3; ++c) put(v.colour_fixed[c], 2);
+      put(v.colour_share, 2);
+    }
+    return raw;
+  };
+  const std::uint64_t origin = VoxelKey::make(9, 128, 4, 140).bits;
+  const VoxelData one{0.25f, 1.0f, {0, 0, 0}, 0};
+  write_bytes(dir / "hand.tile", wrap_tile(4, {2, 0, 2}, 3, 1, raw_of(origin, std::uint64_t{1} << 6, {one})));
+  VoxelTable hand(3);
+  read_tile(dir / "hand.tile", hand);
+  ASSERT_NE(hand.find(live), nullptr);
+  EXPECT_EQ(hand.find(live)->distance, 0.25f);
+  EXPECT_EQ(hand.live_count(), 1u);
+
+  write_bytes(dir / "absent.tile", wrap_tile(4, {2, 0, 2}, 3, 1, raw_of(origin, 1, {VoxelData{}})));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "absent.tile", fresh);
+  }, "absent.tile", "stores an absent voxel");
+  write_bytes(dir / "short.tile", wrap_tile(4, {2, 0, 2}, 3, 1, raw_of(origin, 3, {one})));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "short.tile", fresh);
+  }, "short.tile", "runs past the payload");
+  // A level-4 block is 2^3 voxels: bit 8 lies beyond it.
+  const std::uint64_t small = VoxelKey::make(4, 4, 0, 4).bits;
+  write_bytes(dir / "beyond.tile", wrap_tile(4, {2, 0, 2}, 3, 1, raw_of(small, std::uint64_t{1} << 8, {one})));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "beyond.tile", fresh);
+  }, "beyond.tile", "marks voxels beyond its size");
 }
 
 TEST(Tile, TruncationWrongMagicAndWrongBrickLevelAreRefused) {
@@ -285,7 +387,10 @@ TEST(Tile, TruncationWrongMagicAndWrongBrickLevelAreRefused) {
   };
   write_bytes(dir / "short.tile", bytes.size() - 3);
   VoxelTable r(3);
-  expect_input_error([&] { read_tile(dir / "short.tile", r); }, "short.tile", "truncated");
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "short.tile", fresh);
+  }, "short.tile", "truncated");
   write_bytes(dir / "header.tile", 20);
   expect_input_error([&] { read_tile(dir / "header.tile", r); }, "header.tile", "shorter than its 64-byte header");
   write_text(dir / "text.tile", std::string(100, 'x'));
