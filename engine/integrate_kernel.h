@@ -25,27 +25,30 @@ inline Eigen::Vector2d pixel_of(const Sensor& s, const Eigen::Vector3d& xs) {
 }
 
 // Ownership of lines of sight by a triangle in the sensor plane. Edge e joins local vertices
-// lo[e], hi[e], ordered by sample index, so the triangle on the other side of the edge evaluates a
+// lo, hi, ordered by sample index, so the triangle on the other side of the edge evaluates a
 // bit-identical edge function and exactly one of the two owns each point of the edge. The vertices
-// are kept as the frame stores them (float) and widened on use, which is exact.
+// come as the frame stores them (float) and are widened, which is exact; each edge keeps its start
+// and its direction in double, computed once here rather than at every point tested (the owner
+// test runs two or three times per voxel of an enumeration), with the very operations of
+// edge() below, so the edge functions are unchanged to the bit.
 struct Ownership {
-  Eigen::Vector2f q[3];
-  std::uint8_t lo[3], hi[3];
-  bool positive[3];   // the triangle lies on the positive side of edge e
-  double inv_opp[3];  // 1 / edge function of edge e at the opposite vertex e (never 0)
+  double ax[3], ay[3];  // edge e's start (vertex lo)
+  double dx[3], dy[3];  // edge e's direction: vertex hi - vertex lo
+  double inv_opp[3];    // 1 / edge function of edge e at the opposite vertex e (never 0)
+  bool positive[3];     // the triangle lies on the positive side of edge e
 
   static double edge(const Eigen::Vector2f& lo, const Eigen::Vector2f& hi, const Eigen::Vector2d& p) {
     const Eigen::Vector2d a = lo.cast<double>();
     return cross2(hi.cast<double>() - a, p - a);
   }
   // Sets the fields; false if the triangle is degenerate in the sensor plane.
-  bool init(const Eigen::Vector2f qv[3], const std::uint32_t idx[3]) {
-    for (int k = 0; k < 3; ++k) q[k] = qv[k];
+  bool init(const Eigen::Vector2f q[3], const std::uint32_t idx[3]) {
     for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e
       int a = (e + 1) % 3, b = (e + 2) % 3;
       if (idx[a] > idx[b]) std::swap(a, b);
-      lo[e] = std::uint8_t(a);
-      hi[e] = std::uint8_t(b);
+      const Eigen::Vector2d start = q[a].cast<double>(), direction = q[b].cast<double>() - start;
+      ax[e] = start.x(), ay[e] = start.y();
+      dx[e] = direction.x(), dy[e] = direction.y();
       const double v = edge(q[a], q[b], q[e].cast<double>());
       if (v == 0 || !std::isfinite(v)) return false;
       positive[e] = v > 0;
@@ -59,7 +62,7 @@ struct Ownership {
   bool owns(const Eigen::Vector2d& p, double E[3]) const {
     bool inside = true;
     for (int e = 0; e < 3; ++e) {
-      E[e] = edge(q[lo[e]], q[hi[e]], p);
+      E[e] = dx[e] * (p.y() - ay[e]) - dy[e] * (p.x() - ax[e]);  // edge(), term for term
       inside &= positive[e] ? E[e] >= 0 : E[e] < 0;
     }
     return inside;

@@ -72,10 +72,11 @@ inline int fast_floor(double x) {
 class BlockCache {
  public:
   explicit BlockCache(BrickMap& map) : map_(map) {}
-  VoxelData& voxel(VoxelKey key, VoxelKey origin) {
+  // The voxels of the block with origin `origin` holding `key`, x fastest.
+  VoxelData* block(VoxelKey key, VoxelKey origin) {
     BlockRef& b = slots_[std::hash<VoxelKey>{}(origin) & (kSlots - 1)];
     if (!b.data || b.origin != origin) b = map_.block(key);
-    return b.at(key);
+    return b.data;
   }
 
  private:
@@ -309,17 +310,23 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       // A voxel X at ray distance d in [-behind ramp, ramp] from the triangle (d > 0 towards the
       // sensor) lies at X = P - d dir, P on the triangle and dir its unit line of sight: its
       // camera depth is z(P) - d dir_z with 0 < dir_z <= 1, its offset along n is n.P - d n.dir.
-      double s_lo[3], s_hi[3];  // offset along n of each vertex, per unit ramp below and above
-      double s[3];
+      // Per vertex: offset s along n and, per unit ramp, the offsets below and above it. The
+      // slab takes the least s plus the least offset below (the greatest plus the greatest above)
+      // for every level at once: looser than per vertex by the ramp times the spread of the three
+      // lines of sight (a pixel's angle), which the margins dwarf.
+      double s_min = std::numeric_limits<double>::infinity(), s_max = -s_min;
+      double below = s_min, above = -s_min;
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t i = g.idx[k];
         const double z = p.depth[i];
         zmin = std::min(zmin, z);
         zmax = std::max(zmax, z);
-        s[k] = n.dot(frame.position[i].cast<double>());
+        const double s = n.dot(frame.position[i].cast<double>());
+        s_min = std::min(s_min, s);
+        s_max = std::max(s_max, s);
         const double sd = n.dot(p.sight[i]);
-        s_lo[k] = std::min(-sd, options.behind * sd);
-        s_hi[k] = std::max(-sd, options.behind * sd);
+        below = std::min(below, std::min(-sd, options.behind * sd));
+        above = std::max(above, std::max(-sd, options.behind * sd));
       }
       for (int l = g.coarsest; l <= g.level; ++l) {
         const double ramp = ramp_table[g.level][l];
@@ -327,10 +334,8 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
         t.zmin = std::min(t.zmin, zmin);
         t.zmax = std::max(t.zmax, zmax);
         t.ramp = std::max(t.ramp, ramp);
-        for (int k = 0; k < 3; ++k) {
-          t.smin = std::min(t.smin, s[k] + ramp * s_lo[k]);
-          t.smax = std::max(t.smax, s[k] + ramp * s_hi[k]);
-        }
+        t.smin = std::min(t.smin, s_min + ramp * below);
+        t.smax = std::max(t.smax, s_max + ramp * above);
       }
     });
   });
@@ -447,8 +452,16 @@ class RowPrefilter {
     double lo = double(*ic0), hi = double(*ic1);
     for (int k = 0; k < n_row_; ++k)
       if (row_[k].a + row_[k].b * ib < 0) return false;
-    for (int k = 0; k < n_lo_; ++k) lo = std::max(lo, std::floor((lo_[k].a + lo_[k].b * ib) * lo_[k].r) - 1);
-    for (int k = 0; k < n_hi_; ++k) hi = std::min(hi, std::ceil((hi_[k].a + hi_[k].b * ib) * hi_[k].r) + 1);
+    // floor(x) - 1 > lo implies x - 1 > lo (and ceil(x) + 1 < hi implies x + 1 < hi): the rounding
+    // call, a libm call on baseline x86-64, is made only for the bounds that can narrow.
+    for (int k = 0; k < n_lo_; ++k) {
+      const double x = (lo_[k].a + lo_[k].b * ib) * lo_[k].r;
+      if (x - 1 > lo) lo = std::max(lo, std::floor(x) - 1);
+    }
+    for (int k = 0; k < n_hi_; ++k) {
+      const double x = (hi_[k].a + hi_[k].b * ib) * hi_[k].r;
+      if (x + 1 < hi) hi = std::min(hi, std::ceil(x) + 1);
+    }
     if (lo > hi) return false;
     *ic0 = std::int64_t(lo);
     *ic1 = std::int64_t(hi);
@@ -566,6 +579,12 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         }
         const RowPrefilter prefilter(cp, double(a0 - 1) * h, double(a1 + 1) * h, 1e-6 * h);
         const GridTriangle* last_owner = nullptr;
+        // Blocks of this level: 2^log voxels per axis, x fastest (VoxelTable). A column crosses a
+        // block every 2^log voxels, so its voxels are found from the block in hand by their
+        // offset, and the key, its block origin and the block cache are consulted once per block.
+        const int log = block_log(level, brick_level);
+        const std::uint32_t in_block = (1u << log) - 1;
+        const int shift_a = ax * log;
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
           std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
           if (!prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
@@ -594,6 +613,10 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             tmax = std::min(tmax, double(a1 + 1) * h);
             const std::int64_t i0 = std::max<std::int64_t>(a0, std::int64_t(std::ceil(tmin / h)));
             const std::int64_t i1 = std::min<std::int64_t>(a1, std::int64_t(std::floor(tmax / h)));
+            const std::uint32_t column_offset = ((std::uint32_t(ib) & in_block) << (bx * log)) |
+                                                ((std::uint32_t(ic) & in_block) << (cx * log));
+            std::int64_t run = -1;  // ia >> log of the block in hand
+            VoxelData* run_voxels = nullptr;
             for (std::int64_t ia = i0; ia <= i1; ++ia) {
               Vector3d X = base;
               X[ax] += h * double(ia);
@@ -639,16 +662,21 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               const double ramp = ramp_of[owner->level];
               const double plane = owner->normal.dot(owner->P0.cast<double>() - X);
               if (beyond_ramp(plane, ramp, options)) continue;
-              std::int64_t idx[3];
-              idx[ax] = ia;
-              idx[bx] = ib;
-              idx[cx] = ic;
-              const VoxelKey key = VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
-              const VoxelKey origin = block_origin(key, brick_level);
               const double cosine = sight_cosine(owner->normal, X - centre);
               VoxelSample v;
               if (!voxel_sample(frame, owner->idx, owner->own, E, plane, cosine, ramp, options, &v)) continue;
-              accumulate(cache.voxel(key, origin), v.distance, v.weight, v.has_colour ? v.colour : nullptr);
+              if ((ia >> log) != run) {
+                std::int64_t idx[3];
+                idx[ax] = ia;
+                idx[bx] = ib;
+                idx[cx] = ic;
+                const VoxelKey key =
+                    VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
+                run_voxels = cache.block(key, block_origin(key, brick_level));
+                run = ia >> log;
+              }
+              VoxelData& voxel = run_voxels[column_offset | ((std::uint32_t(ia) & in_block) << shift_a)];
+              accumulate(voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
               ++local;
             }
           }
