@@ -89,7 +89,6 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
   const Sensor& sensor = frame.sensor;
   const bool perspective = sensor.kind == Sensor::Kind::Perspective;
   const Vector3d centre = sensor.centre(), axis = sensor.axis();
-  const Eigen::Matrix3d& R = sensor.R;
   const double h = root.cell_size(level);
   const double ramp = insertion_ramp(options, root, level, level_of_triangle);
   const double margin = 1e-3 * h;
@@ -200,7 +199,7 @@ void contributions_at_level(const DepthFrame& frame, const PreparedTriangle& T, 
         X[ax] += h * double(ia);
         Vector2d q;
         // Sensor::project and ray_direction, inlined with the centre hoisted out of the loop.
-        const Vector3d xs = R * X + sensor.t;
+        const Vector3d xs = camera_point(sensor, X);
         if (perspective) {
           if (!(xs.z() > 0)) continue;
           q = pixel_of(sensor, xs);

@@ -17,6 +17,23 @@ namespace sf::integrate_detail {
 
 inline double cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
 
+// Camera coordinates R X + t of a world point whose terms R(i, a) X[a] are `terms[a][i]`, summed
+// in the order Eigen 3.4's SSE2 product sums them (rows 0 and 1 left to right, row 2 its last two
+// terms first), so that fields are those of `R * X + t`. Both enumerations project with this, so
+// they agree to the bit; the projective one computes the terms of a column's fixed axes once.
+inline Eigen::Vector3d camera_point(const double terms[3][3], const Eigen::Vector3d& t) {
+  return {((terms[0][0] + terms[1][0]) + terms[2][0]) + t.x(), ((terms[0][1] + terms[1][1]) + terms[2][1]) + t.y(),
+          (terms[0][2] + (terms[1][2] + terms[2][2])) + t.z()};
+}
+inline void camera_terms(const Eigen::Matrix3d& R, const Eigen::Vector3d& X, int a, double terms[3][3]) {
+  for (int i = 0; i < 3; ++i) terms[a][i] = R(i, a) * X[a];
+}
+inline Eigen::Vector3d camera_point(const Sensor& s, const Eigen::Vector3d& X) {
+  double terms[3][3];
+  for (int a = 0; a < 3; ++a) camera_terms(s.R, X, a, terms);
+  return camera_point(terms, s.t);
+}
+
 // Pixel coordinates of camera-frame point xs (z > 0), one division for both axes. Both
 // enumerations project with this, so their ownership decisions agree bit for bit.
 inline Eigen::Vector2d pixel_of(const Sensor& s, const Eigen::Vector3d& xs) {
@@ -29,8 +46,8 @@ inline Eigen::Vector2d pixel_of(const Sensor& s, const Eigen::Vector3d& xs) {
 // bit-identical edge function and exactly one of the two owns each point of the edge. The vertices
 // come as the frame stores them (float) and are widened, which is exact; each edge keeps its start
 // and its direction in double, computed once here rather than at every point tested (the owner
-// test runs two or three times per voxel of an enumeration), with the very operations of
-// edge() below, so the edge functions are unchanged to the bit.
+// test runs for every voxel of an enumeration, and again where the first guess fails), with the
+// very operations of edge() below, so the edge functions are unchanged to the bit.
 struct Ownership {
   double ax[3], ay[3];  // edge e's start (vertex lo)
   double dx[3], dy[3];  // edge e's direction: vertex hi - vertex lo
@@ -63,7 +80,9 @@ struct Ownership {
     bool inside = true;
     for (int e = 0; e < 3; ++e) {
       E[e] = dx[e] * (p.y() - ay[e]) - dy[e] * (p.x() - ax[e]);  // edge(), term for term
-      inside &= positive[e] ? E[e] >= 0 : E[e] < 0;
+      // positive ? E >= 0 : E < 0, without a branch: the side is a coin toss for the many
+      // points near an edge, and a mispredicted branch costs more than both comparisons.
+      inside &= (positive[e] & (E[e] >= 0)) | (!positive[e] & (E[e] < 0));
     }
     return inside;
   }
@@ -120,7 +139,8 @@ inline bool insertion_levels(const DepthFrame& f, const std::uint32_t idx[3], co
 // voxels of an enumeration's bounding slab that lie off the ramp.
 // `plane` = normal . (P0 - X): the ray distance times the cosine, which is < 0 for any voxel accepted.
 inline bool beyond_ramp(double plane, double ramp, const IntegrateOptions& options) {
-  return plane > 0 ? plane > ramp * options.behind : -plane > ramp;
+  const bool in_front = plane > 0;  // both sides compared, no branch: the side is unpredictable
+  return (in_front & (plane > ramp * options.behind)) | (!in_front & (-plane > ramp));
 }
 
 // The cosine between the triangle's normal and the line of sight D (from the sensor to the voxel,

@@ -113,7 +113,15 @@ struct Prepared {
   int QW = 0, QH = 0, TX = 0, TY = 0;
   std::vector<Quad> quad;
   std::vector<GridTriangle> tris;
-  std::vector<TileLevel> tile_levels;  // [tile * L + level]
+  // Per tile, the bounds at each level some triangle of the frame is inserted at: [level0,
+  // level0 + levels), about 5 of the 19 a key allows (the table is written for every read of a
+  // frame).
+  std::vector<TileLevel> tile_levels;
+  int level0 = 0, levels = 0;
+  TileLevel& tile_level(int tile, int level) { return tile_levels[std::size_t(tile) * levels + (level - level0)]; }
+  const TileLevel& tile_level(int tile, int level) const {
+    return tile_levels[std::size_t(tile) * levels + (level - level0)];
+  }
   std::vector<Vector3d> tile_normal;
   // Per sample (a vertex of up to six triangles, each in the bounds of up to four tiles): camera
   // depth and unit line of sight, computed once rather than per triangle and tile.
@@ -151,7 +159,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     for (std::uint32_t i : tri) {
       const std::uint32_t along = std::uint32_t(cl) + (i - lowest);  // columns from the row's start
       if (along >= 2 * std::uint32_t(W)) return false;  // two rows or more below
-      const int r = along < std::uint32_t(W) ? rl : rl + 1;
+      const int r = rl + int(along >= std::uint32_t(W));  // no branch: the rows alternate
       const int c = int(along) - (r - rl) * W;
       if (!is_pixel_centre(frame, i, r, c)) return false;
       c0 = std::min(c0, c), c1 = std::max(c1, c), r1 = std::max(r1, r);
@@ -262,7 +270,14 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   });
 
   // Per tile and level: bounds of the prisms of the triangles inserted there.
-  p.tile_levels.assign(std::size_t(TX) * TY * L, TileLevel{});
+  int lowest = L, highest = -1;  // levels of equation 1 inserted
+  for (int l = 0; l < L; ++l)
+    if (p.stats.triangles_per_level[l] > 0) lowest = std::min(lowest, l), highest = l;
+  p.level0 = highest < 0                ? 0
+             : options.single_level >= 0 ? options.single_level
+                                         : std::max(0, lowest - options.coarser_levels);
+  p.levels = highest < 0 ? 0 : highest - p.level0 + 1;
+  p.tile_levels.assign(std::size_t(TX) * TY * std::size_t(p.levels), TileLevel{});
   p.tile_normal.assign(std::size_t(TX) * TY, Vector3d::Zero());
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
@@ -291,7 +306,6 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     for (int l = 0; l <= lt; ++l) ramp_table[lt][l] = insertion_ramp(options, root, l, lt);
   tbb::parallel_for(0, TX * TY, [&](int tile) {
     if (!tile_active[tile]) return;
-    TileLevel* tl = &p.tile_levels[std::size_t(tile) * L];
     int qr0, qr1, qc0, qc1;
     tile_quads(tile, &qr0, &qr1, &qc0, &qc1);
     auto for_each_triangle = [&](auto&& f) {
@@ -330,7 +344,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       }
       for (int l = g.coarsest; l <= g.level; ++l) {
         const double ramp = ramp_table[g.level][l];
-        TileLevel& t = tl[l];
+        TileLevel& t = p.tile_level(tile, l);
         t.zmin = std::min(t.zmin, zmin);
         t.zmax = std::max(t.zmax, zmax);
         t.ramp = std::max(t.ramp, ramp);
@@ -366,7 +380,7 @@ ItemFrustum item_frustum(const Prepared& p, const RootCube& root, int tile, int 
   ItemFrustum fr;
   const int tx = tile % p.TX, ty = tile / p.TX;
   fr.c0 = tx * kTile, fr.c1 = std::min(p.QW, fr.c0 + kTile), fr.r0 = ty * kTile, fr.r1 = std::min(p.QH, fr.r0 + kTile);
-  const TileLevel& tl = p.tile_levels[std::size_t(tile) * L + level];
+  const TileLevel& tl = p.tile_level(tile, level);
   const double h = root.cell_size(level);
   const double margin = 1e-3 * h;
   // The tile's frustum slab as half-spaces a . x_cam + b >= 0, moved to world coordinates.
@@ -489,7 +503,7 @@ class RowPrefilter {
 };
 
 bool has_prisms(const Prepared& p, int tile, int level) {
-  const TileLevel& tl = p.tile_levels[std::size_t(tile) * L + level];
+  const TileLevel& tl = p.tile_level(tile, level);
   return tl.zmin <= tl.zmax;
 }
 
@@ -526,9 +540,9 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   };
   std::vector<Item> items;
   for (int tile = 0; tile < TX * TY; ++tile)
-    for (int l = 0; l < L; ++l) {
+    for (int l = p.level0; l < p.level0 + p.levels; ++l) {
       if (!has_prisms(p, tile, l)) continue;
-      const TileLevel& tl = p.tile_levels[std::size_t(tile) * L + l];
+      const TileLevel& tl = p.tile_level(tile, l);
       const double u = (tile % TX) * kTile + 0.5 * kTile + 0.5, v = (tile / TX) * kTile + 0.5 * kTile + 0.5;
       const double z = 0.5 * (tl.zmin + tl.zmax);
       const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
@@ -578,7 +592,16 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           cp[k] = {hs.m.dot(root.min) - hs.k, hs.m[bx] * h, hs.m[cx] * h, hs.m[ax], hs.m[ax] != 0 ? 1.0 / hs.m[ax] : 0.0};
         }
         const RowPrefilter prefilter(cp, double(a0 - 1) * h, double(a1 + 1) * h, 1e-6 * h);
-        const GridTriangle* last_owner = nullptr;
+        // The planes by their part in a column's clip: parallel to it, bounding t below, above.
+        int parallel[8], lower[8], upper[8], n_parallel = 0, n_lower = 0, n_upper = 0;
+        for (int k = 0; k < 8; ++k) {
+          if (cp[k].ma == 0)
+            parallel[n_parallel++] = k;
+          else if (cp[k].ma > 0)
+            lower[n_lower++] = k;
+          else
+            upper[n_upper++] = k;
+        }
         // Blocks of this level: 2^log voxels per axis, x fastest (VoxelTable). A column crosses a
         // block every 2^log voxels, so its voxels are found from the block in hand by their
         // offset, and the key, its block origin and the block cache are consulted once per block.
@@ -588,6 +611,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
           std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
           if (!prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
+          double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
+          for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
           for (std::int64_t ic = ic0; ic <= ic1; ++ic) {
             Vector3d base;
             base[ax] = root.min[ax];
@@ -595,24 +620,25 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             base[cx] = root.min[cx] + h * double(ic);
             double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // a0..a1 in index space
             bool empty = false;
-            for (const ColumnPlane& c : cp) {
-              const double v = c.v0 + double(ib) * c.vb + double(ic) * c.vc;
-              if (c.ma == 0) {
-                if (v < 0) {
-                  empty = true;
-                  break;
-                }
-              } else if (c.ma > 0) {
-                tmin = std::max(tmin, -v * c.inv_ma);
-              } else {
-                tmax = std::min(tmax, -v * c.inv_ma);
-              }
+            for (int j = 0; j < n_parallel && !empty; ++j)
+              empty = row_value[parallel[j]] + double(ic) * cp[parallel[j]].vc < 0;
+            if (empty) continue;
+            for (int j = 0; j < n_lower; ++j) {
+              const ColumnPlane& c = cp[lower[j]];
+              tmin = std::max(tmin, -(row_value[lower[j]] + double(ic) * c.vc) * c.inv_ma);
             }
-            if (empty || tmin > tmax) continue;
+            for (int j = 0; j < n_upper; ++j) {
+              const ColumnPlane& c = cp[upper[j]];
+              tmax = std::min(tmax, -(row_value[upper[j]] + double(ic) * c.vc) * c.inv_ma);
+            }
+            if (tmin > tmax) continue;
             tmin = std::max(tmin, double(a0 - 1) * h);  // finite before the integer casts
             tmax = std::min(tmax, double(a1 + 1) * h);
-            const std::int64_t i0 = std::max<std::int64_t>(a0, std::int64_t(std::ceil(tmin / h)));
-            const std::int64_t i1 = std::min<std::int64_t>(a1, std::int64_t(std::floor(tmax / h)));
+            const std::int64_t i0 = std::max<std::int64_t>(a0, -fast_floor(-(tmin / h)));  // ceil
+            const std::int64_t i1 = std::min<std::int64_t>(a1, fast_floor(tmax / h));
+            double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
+            camera_terms(R, base, bx, terms);
+            camera_terms(R, base, cx, terms);
             const std::uint32_t column_offset = ((std::uint32_t(ib) & in_block) << (bx * log)) |
                                                 ((std::uint32_t(ic) & in_block) << (cx * log));
             std::int64_t run = -1;  // ia >> log of the block in hand
@@ -620,16 +646,18 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             for (std::int64_t ia = i0; ia <= i1; ++ia) {
               Vector3d X = base;
               X[ax] += h * double(ia);
-              const Vector3d xs = R * X + sensor.t;
+              camera_terms(R, X, ax, terms);
+              const Vector3d xs = camera_point(terms, sensor.t);
               if (!(xs.z() > 0)) continue;
               const Vector2d q = pixel_of(sensor, xs);
               const int col = fast_floor(q.x() - 0.5), row = fast_floor(q.y() - 0.5);
               if (!(col >= c0 && col < c1 && row >= r0 && row < r1)) continue;  // another tile's voxel
-              // The owner: the previous candidate's, which owns most lines of sight of a column and
-              // of its neighbours (ownership is exclusive, so if it owns this one no other triangle
-              // does); else one of the quad's triangles (the likelier first), or, on the quad's
-              // left or top border, one of the neighbouring quads' (edge functions give a shared
-              // edge to one side only).
+              // The owner: one of the quad's triangles (the likelier first), or, on the quad's left
+              // or top border, one of the neighbouring quads' (edge functions give a shared edge to
+              // one side only). Trying the previous voxel's owner first, as this once did, saves
+              // nothing: it owns the next only a third of the time (a step along a column moves
+              // the projection up to 0.8 pixel), and the extra test and its unpredictable branch
+              // cost more (bench/README.md, session 31).
               const GridTriangle* owner = nullptr;
               double E[3] = {0, 0, 0};
               auto try_triangle = [&](std::int32_t t) {
@@ -645,18 +673,13 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
                 const int first = first_guess ? 0 : 1;
                 return try_triangle(qd.tri[first]) || try_triangle(qd.tri[1 - first]);
               };
-              if (last_owner && last_owner->own.owns(q, E)) {
-                owner = last_owner;
-              } else {
-                const Quad& here = quad[std::size_t(row) * QW + col];
-                const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
-                if (!try_quad(row, col, guess)) {
-                  const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
-                  if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
-                        (left && top && try_quad(row - 1, col - 1, true))))
-                    continue;
-                }
-                last_owner = owner;
+              const Quad& here = quad[std::size_t(row) * QW + col];
+              const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
+              if (!try_quad(row, col, guess)) {
+                const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
+                if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
+                      (left && top && try_quad(row - 1, col - 1, true))))
+                  continue;
               }
               if (level < owner->coarsest || level > owner->level) continue;
               const double ramp = ramp_of[owner->level];
@@ -696,7 +719,10 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
 namespace {
 
 // The surface cells of a triangle with vertex P inserted at levels [coarsest, level] (FrameReach).
-void add_cells(const Vector3d& P, int level, int coarsest, const RootCube& root, std::vector<VoxelKey>& cells) {
+// `last` holds the cell last added per level: neighbouring triangles mostly share their cells,
+// and leaving the repeats out keeps the sort that follows short.
+void add_cells(const Vector3d& P, int level, int coarsest, const RootCube& root, std::vector<VoxelKey>& cells,
+               VoxelKey last[L]) {
   for (int l = coarsest; l <= level; ++l) {
     const int cl = std::max(l - 3, 0);
     const double h = root.cell_size(cl);
@@ -705,7 +731,9 @@ void add_cells(const Vector3d& P, int level, int coarsest, const RootCube& root,
     for (int a = 0; a < 3; ++a)
       c[a] = std::uint32_t(std::clamp<std::int64_t>(std::int64_t(std::floor((P[a] - root.min[a]) / h)), 0, n - 1)
                            << (l - cl));
-    cells.push_back(VoxelKey::make(l, c[0], c[1], c[2]));
+    const VoxelKey cell = VoxelKey::make(l, c[0], c[1], c[2]);
+    if (cell != last[l]) cells.push_back(cell);
+    last[l] = cell;
   }
 }
 
@@ -720,6 +748,8 @@ void sort_unique(std::vector<T>& v) {
 FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles, const RootCube& root,
                        const IntegrateOptions& options, int brick_level, IntegrateScratch* scratch) {
   FrameReach reach;
+  VoxelKey last_cell[L];
+  std::fill_n(last_cell, L, VoxelKey{~std::uint64_t{0}});  // no valid key has all bits set
   auto add_bricks = [&](BrickCoord lo, BrickCoord hi) {  // inclusive
     for (std::uint32_t z = lo.z; z <= hi.z; ++z)
       for (std::uint32_t y = lo.y; y <= hi.y; ++y)
@@ -731,7 +761,7 @@ FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>
   if (prepare(frame, triangles, root, options, nullptr, &p)) {
     // The bricks of every item's candidate box: integration evaluates no voxel outside them.
     for (int tile = 0; tile < p.TX * p.TY; ++tile)
-      for (int l = 0; l < L; ++l) {
+      for (int l = p.level0; l < p.level0 + p.levels; ++l) {
         if (!has_prisms(p, tile, l)) continue;
         const ItemFrustum fr = item_frustum(p, root, tile, l);
         if (fr.empty()) continue;
@@ -766,7 +796,7 @@ FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>
         for (std::int32_t t : p.quad[std::size_t(r) * p.QW + c].tri)
           if (t >= 0 && p.tris[t].ok)
             add_cells(frame.position[p.tris[t].idx[0]].cast<double>(), p.tris[t].level, p.tris[t].coarsest, root,
-                      reach.cells);
+                      reach.cells, last_cell);
   } else {
     // Any sensor: per triangle, the bricks of its bounding box widened by its longest ramp (a
     // voxel gets a contribution only within a ramp of its triangle).
@@ -783,7 +813,7 @@ FrameReach frame_reach(const DepthFrame& frame, const std::vector<FrameTriangle>
       } else {
         add_bricks(lo, hi);
       }
-      add_cells(frame.position[tri[0]].cast<double>(), lt, coarsest, root, reach.cells);
+      add_cells(frame.position[tri[0]].cast<double>(), lt, coarsest, root, reach.cells, last_cell);
     }
   }
   sort_unique(reach.bricks);

@@ -181,7 +181,11 @@ std::array<std::size_t, kMaxLevel + 1> BrickMap::live_voxels_per_level() const {
       [&](const tbb::blocked_range<std::size_t>& r, Counts n) {
         VoxelTable scratch(brick_level_);
         for (std::size_t i = r.begin(); i != r.end(); ++i)
-          field_of(*all[i], scratch).for_each([&](VoxelKey k, const VoxelData&) { ++n[std::size_t(k.level())]; });
+          field_of(*all[i], scratch).for_each_block([&](VoxelKey origin, int log, const VoxelData* v) {
+            std::size_t live = 0;  // counted without a branch per voxel: blocks are about half full
+            for (std::size_t j = 0, m = std::size_t{1} << (3 * log); j < m; ++j) live += v[j].live();
+            n[std::size_t(origin.level())] += live;
+          });
         return n;
       },
       [](Counts a, const Counts& b) {

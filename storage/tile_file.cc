@@ -200,7 +200,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
     const std::size_t n = std::size_t{1} << (3 * blocks[j].log);
     std::uint64_t mask = 0;
     for (std::size_t i = 0; i < n; ++i)
-      if (blocks[j].data[i].weight != 0) mask |= std::uint64_t{1} << i;
+      mask |= std::uint64_t(blocks[j].data[i].weight != 0) << i;
     present[j] = mask;
     raw_size += 16 + std::size_t(std::popcount(mask)) * kRecord;
   }
