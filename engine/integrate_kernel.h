@@ -45,19 +45,16 @@ inline Eigen::Vector2d pixel_of(const Sensor& s, const Eigen::Vector3d& xs) {
 // lo, hi, ordered by sample index, so the triangle on the other side of the edge evaluates a
 // bit-identical edge function and exactly one of the two owns each point of the edge. The vertices
 // come as the frame stores them (float) and are widened, which is exact; each edge keeps its start
-// and its direction in double, computed once here rather than at every point tested (the owner
-// test runs for every voxel of an enumeration, and again where the first guess fails), with the
-// very operations of edge() below, so the edge functions are unchanged to the bit.
+// and its direction in double, computed once rather than at every point tested (the owner test
+// runs for every voxel of an enumeration, and again where the first guess fails).
 struct Ownership {
   double ax[3], ay[3];  // edge e's start (vertex lo)
   double dx[3], dy[3];  // edge e's direction: vertex hi - vertex lo
   double inv_opp[3];    // 1 / edge function of edge e at the opposite vertex e (never 0)
   bool positive[3];     // the triangle lies on the positive side of edge e
 
-  static double edge(const Eigen::Vector2f& lo, const Eigen::Vector2f& hi, const Eigen::Vector2d& p) {
-    const Eigen::Vector2d a = lo.cast<double>();
-    return cross2(hi.cast<double>() - a, p - a);
-  }
+  // The edge function of edge e at p: cross2(direction, p - start).
+  double edge(int e, const Eigen::Vector2d& p) const { return dx[e] * (p.y() - ay[e]) - dy[e] * (p.x() - ax[e]); }
   // Sets the fields; false if the triangle is degenerate in the sensor plane.
   bool init(const Eigen::Vector2f q[3], const std::uint32_t idx[3]) {
     for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e
@@ -66,7 +63,7 @@ struct Ownership {
       const Eigen::Vector2d start = q[a].cast<double>(), direction = q[b].cast<double>() - start;
       ax[e] = start.x(), ay[e] = start.y();
       dx[e] = direction.x(), dy[e] = direction.y();
-      const double v = edge(q[a], q[b], q[e].cast<double>());
+      const double v = edge(e, q[e].cast<double>());
       if (v == 0 || !std::isfinite(v)) return false;
       positive[e] = v > 0;
       inv_opp[e] = 1.0 / v;
@@ -79,7 +76,7 @@ struct Ownership {
   bool owns(const Eigen::Vector2d& p, double E[3]) const {
     bool inside = true;
     for (int e = 0; e < 3; ++e) {
-      E[e] = dx[e] * (p.y() - ay[e]) - dy[e] * (p.x() - ax[e]);  // edge(), term for term
+      E[e] = edge(e, p);
       // positive ? E >= 0 : E < 0, without a branch: the side is a coin toss for the many
       // points near an edge, and a mispredicted branch costs more than both comparisons.
       inside &= (positive[e] & (E[e] >= 0)) | (!positive[e] & (E[e] < 0));

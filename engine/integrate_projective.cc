@@ -106,6 +106,8 @@ BrickCoord brick_at(const RootCube& root, int brick_level, const Vector3d& X) {
   return BrickCoord{c[0], c[1], c[2]};
 }
 
+constexpr int L = kMaxLevel + 1;  // levels a key allows
+
 // A perspective depth map prepared for voxel-centric insertion: its pixel quads, triangles, and
 // per (tile, level) the bounds of the prisms inserted there.
 struct Prepared {
@@ -128,9 +130,9 @@ struct Prepared {
   std::vector<double> depth;
   std::vector<Vector3d> sight;
   double behind = 1;  // IntegrateOptions::behind
+  double ramp[L][L];  // insertion_ramp by [level of the triangle][insertion level <= it]
   IntegrateStats stats;  // triangles inserted, per level
 };
-constexpr int L = kMaxLevel + 1;
 
 // Pixel quad -> its triangles (two slots); false if any triangle is not within one quad, or any
 // sample is off its pixel centre (the frame then goes to the prism path).
@@ -300,10 +302,8 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
         p.sight[i] = (P - centre).normalized();
       }
   });
-  // Ramps by (level of the triangle, insertion level).
-  double ramp_table[L][L];
   for (int lt = 0; lt < L; ++lt)
-    for (int l = 0; l <= lt; ++l) ramp_table[lt][l] = insertion_ramp(options, root, l, lt);
+    for (int l = 0; l <= lt; ++l) p.ramp[lt][l] = insertion_ramp(options, root, l, lt);
   tbb::parallel_for(0, TX * TY, [&](int tile) {
     if (!tile_active[tile]) return;
     int qr0, qr1, qc0, qc1;
@@ -343,7 +343,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
         above = std::max(above, std::max(-sd, options.behind * sd));
       }
       for (int l = g.coarsest; l <= g.level; ++l) {
-        const double ramp = ramp_table[g.level][l];
+        const double ramp = p.ramp[g.level][l];
         TileLevel& t = p.tile_level(tile, l);
         t.zmin = std::min(t.zmin, zmin);
         t.zmax = std::max(t.zmax, zmax);
@@ -582,8 +582,6 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         const int ax = fr.ax, bx = fr.bx, cx = fr.cx;
         const std::int64_t a0 = fr.first[ax], a1 = fr.last[ax];
         const double h = root.cell_size(level);
-        double ramp_of[L];  // by the owner's level
-        for (int lt = level; lt < L; ++lt) ramp_of[lt] = insertion_ramp(options, root, level, lt);
         // Each half-space, along a column (ib, ic): m . X - k = v0 + ib vb + ic vc + (a - root.min) ma.
         // The planes carry margins far above the rounding of this affine form.
         ColumnPlane cp[8];
@@ -682,7 +680,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
                   continue;
               }
               if (level < owner->coarsest || level > owner->level) continue;
-              const double ramp = ramp_of[owner->level];
+              const double ramp = p.ramp[owner->level][level];
               const double plane = owner->normal.dot(owner->P0.cast<double>() - X);
               if (beyond_ramp(plane, ramp, options)) continue;
               const double cosine = sight_cosine(owner->normal, X - centre);
