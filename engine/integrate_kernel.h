@@ -163,7 +163,9 @@ struct VoxelSample {
   std::uint8_t colour[3];
   bool has_colour;
 };
-inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Ownership& own, const double E[3],
+// `Own` gives the barycentric coordinates from E (Ownership, or the projective path's quad shape).
+template <typename Own>
+inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Own& own, const double E[3],
                          double plane, double cosine, double ramp, const IntegrateOptions& options, VoxelSample* out) {
   if (!(-cosine >= options.min_cosine)) return false;  // cosine < 0: the normal faces the sensor
   const double distance = plane / cosine;  // > 0: in front of the surface

@@ -34,14 +34,69 @@ using namespace integrate_detail;
 // (far views of a city: 2.9 candidates per contribution with 8, 1.67 with 4) for more items.
 constexpr int kTile = 4;
 
-struct GridTriangle {
+// What the kernel reads of a triangle once it owns a voxel. Its ownership is not here: the quad
+// holds it as a shape (below). One cache line, so that the owner costs one load.
+struct alignas(64) GridTriangle {
   Vector3d normal;     // unit, facing the sensor
   Eigen::Vector3f P0;  // the first vertex, as the frame stores it
-  Ownership own;
   std::uint32_t idx[3];
   std::int8_t level = -1;  // level of equation 1; -1: not inserted
   std::int8_t coarsest = 0;
   bool ok = false;         // non-degenerate (inserted with contributions)
+};
+
+// A triangle of a pixel quad by its corners: vertex k at corner `(code >> 2k) & 3`, corners
+// numbered 0 top left, 1 top right, 2 bottom left, 3 bottom right, which is also their samples'
+// index order. Its edges are those Ownership::init sets for the triangle in the quad of column 0,
+// row 0: starts at 0.5 or 1.5, directions and opposite-vertex values of -1, 0 or 1, all exact. In the
+// quad of column c, row r the starts are c + ax and r + ay, also exact, and the directions and
+// opposite values are the same, so edge() gives the bits Ownership::edge would give for the
+// triangle's own vertices: the owner test needs only the quad, not the triangle's record.
+struct QuadShape {
+  double ax[3], ay[3], dx[3], dy[3], inv_opp[3];
+  bool positive[3];
+  double edge(int e, double col, double row, const Vector2d& p) const {
+    return dx[e] * (p.y() - (row + ay[e])) - dy[e] * (p.x() - (col + ax[e]));
+  }
+  // Ownership::owns for the triangle of this shape in the quad at (col, row).
+  bool owns(double col, double row, const Vector2d& p, double E[3]) const {
+    bool inside = true;
+    for (int e = 0; e < 3; ++e) {
+      E[e] = edge(e, col, row, p);
+      inside &= (positive[e] & (E[e] >= 0)) | (!positive[e] & (E[e] < 0));
+    }
+    return inside;
+  }
+  void bary(const double E[3], double out[3]) const {
+    for (int e = 0; e < 3; ++e) out[e] = E[e] * inv_opp[e];
+  }
+};
+
+// Every shape code (6 bits); codes whose corners repeat are never used.
+struct QuadShapes {
+  QuadShape shape[64];
+  QuadShapes() {
+    for (int code = 0; code < 64; ++code) {
+      Eigen::Vector2f q[3];
+      std::uint32_t idx[3];
+      for (int k = 0; k < 3; ++k) {
+        const int corner = (code >> (2 * k)) & 3;
+        q[k] = Eigen::Vector2f(float(corner & 1) + 0.5f, float(corner >> 1) + 0.5f);
+        idx[k] = std::uint32_t(corner);
+      }
+      QuadShape& s = shape[code];
+      Ownership own;
+      if (idx[0] == idx[1] || idx[1] == idx[2] || idx[0] == idx[2] || !own.init(q, idx)) {
+        s = QuadShape{};
+        continue;
+      }
+      for (int e = 0; e < 3; ++e) {
+        s.ax[e] = own.ax[e], s.ay[e] = own.ay[e], s.dx[e] = own.dx[e], s.dy[e] = own.dy[e];
+        s.inv_opp[e] = own.inv_opp[e];
+        s.positive[e] = own.positive[e];
+      }
+    }
+  }
 };
 
 // Bounds of one tile's prisms at one level: camera depth, and offset along the tile's mean
@@ -59,6 +114,9 @@ struct TileLevel {
 struct Quad {
   std::int32_t tri[2] = {-1, -1};
   std::int8_t dx = 0, dy = 0;
+  // Per slot: the triangle's shape code (QuadShape), plus kUsable once it can own voxels.
+  std::uint8_t shape[2] = {0, 0};
+  static constexpr std::uint8_t kUsable = 64;
 };
 
 // floor() without a libm call (baseline x86-64 has no rounding instruction); |x| < 2^31.
@@ -75,7 +133,14 @@ class BlockCache {
   // The voxels of the block with origin `origin` holding `key`, x fastest.
   VoxelData* block(VoxelKey key, VoxelKey origin) {
     BlockRef& b = slots_[std::hash<VoxelKey>{}(origin) & (kSlots - 1)];
-    if (!b.data || b.origin != origin) b = map_.block(key);
+    if (!b.data || b.origin != origin) {
+      b = map_.block(key);
+      // A block fetched here was last written by another depth map, long out of the caches: ask
+      // for all its lines at once rather than one miss after another as a column reaches them.
+      const char* bytes = reinterpret_cast<const char*>(b.data);
+      const std::size_t size = sizeof(VoxelData) << (3 * b.log);
+      for (std::size_t off = 0; off < size; off += 64) __builtin_prefetch(bytes + off, 1);
+    }
     return b.data;
   }
 
@@ -115,6 +180,7 @@ struct Prepared {
   int QW = 0, QH = 0, TX = 0, TY = 0;
   std::vector<Quad> quad;
   std::vector<GridTriangle> tris;
+  QuadShapes shapes;
   // Per tile, the bounds at each level some triangle of the frame is inserted at: [level0,
   // level0 + levels), about 5 of the 19 a key allows (the table is written for every read of a
   // frame).
@@ -158,20 +224,27 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     if (std::max({tri[0], tri[1], tri[2]}) >= frame.size()) return false;
     const int rl = int(lowest / std::uint32_t(W)), cl = int(lowest - std::uint32_t(rl) * std::uint32_t(W));
     int r0 = rl, c0 = cl, r1 = rl, c1 = cl;
-    for (std::uint32_t i : tri) {
+    int rk[3], ck[3];
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t i = tri[k];
       const std::uint32_t along = std::uint32_t(cl) + (i - lowest);  // columns from the row's start
       if (along >= 2 * std::uint32_t(W)) return false;  // two rows or more below
       const int r = rl + int(along >= std::uint32_t(W));  // no branch: the rows alternate
       const int c = int(along) - (r - rl) * W;
       if (!is_pixel_centre(frame, i, r, c)) return false;
       c0 = std::min(c0, c), c1 = std::max(c1, c), r1 = std::max(r1, r);
+      rk[k] = r, ck[k] = c;
     }
     if (r1 - r0 > 1 || c1 - c0 > 1 || r0 >= QH || c0 >= QW) return false;
+    std::uint8_t shape = 0;
+    for (int k = 0; k < 3; ++k) shape |= std::uint8_t(((rk[k] - r0) * 2 + (ck[k] - c0)) << (2 * k));
     Quad& qd = p.quad[std::size_t(r0) * QW + c0];
     if (qd.tri[0] < 0) {
       qd.tri[0] = std::int32_t(t);
+      qd.shape[0] = shape;
     } else if (qd.tri[1] < 0) {
       qd.tri[1] = std::int32_t(t);
+      qd.shape[1] = shape;
       // Each triangle's vertex that the other lacks.
       auto lone = [&](const FrameTriangle& a, const FrameTriangle& b) {
         for (std::uint32_t i : a)
@@ -252,21 +325,21 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     }
   }
 
-  // The geometry of the triangles this call can evaluate.
+  // The geometry of the triangles this call can evaluate. Their ownership is their quad's shape:
+  // its three corners are distinct pixel centres, so its edges never degenerate.
   tbb::parallel_for(tbb::blocked_range<int>(0, QH, 16), [&](const tbb::blocked_range<int>& rows) {
     for (int qi = rows.begin() * QW; qi != rows.end() * QW; ++qi) {
       if (!quad_needed.empty() && !quad_needed[std::size_t(qi)]) continue;
-      for (std::int32_t t : p.quad[std::size_t(qi)].tri) {
+      Quad& qd = p.quad[std::size_t(qi)];
+      for (int slot = 0; slot < 2; ++slot) {
+        const std::int32_t t = qd.tri[slot];
         if (t < 0 || tris[t].level < 0) continue;
         GridTriangle& g = tris[t];
         Vector3d P[3];
-        Eigen::Vector2f q[3];
-        for (int k = 0; k < 3; ++k) {
-          P[k] = frame.position[g.idx[k]].cast<double>();
-          q[k] = frame.image_pos[g.idx[k]];
-        }
+        for (int k = 0; k < 3; ++k) P[k] = frame.position[g.idx[k]].cast<double>();
         g.P0 = frame.position[g.idx[0]];
-        g.ok = facing_normal(sensor, P, &g.normal) && g.own.init(q, g.idx);
+        g.ok = facing_normal(sensor, P, &g.normal);
+        if (g.ok) qd.shape[slot] |= Quad::kUsable;
       }
     }
   });
@@ -527,6 +600,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   const int QW = p.QW, TX = p.TX, TY = p.TY;
   const std::vector<Quad>& quad = p.quad;
   const std::vector<GridTriangle>& tris = p.tris;
+  const QuadShapes& shapes = p.shapes;
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
   IntegrateStats stats = p.stats;
@@ -657,19 +731,22 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               // the projection up to 0.8 pixel), and the extra test and its unpredictable branch
               // cost more (bench/README.md, session 31).
               const GridTriangle* owner = nullptr;
+              const QuadShape* owner_shape = nullptr;
               double E[3] = {0, 0, 0};
-              auto try_triangle = [&](std::int32_t t) {
-                if (t < 0 || !tris[t].ok) return false;
-                const GridTriangle& g = tris[t];
-                if (!g.own.owns(q, E)) return false;
-                owner = &g;
+              auto try_triangle = [&](const Quad& qd, int slot, int qr, int qc) {
+                const std::uint8_t code = qd.shape[slot];
+                if (!(code & Quad::kUsable)) return false;
+                const QuadShape& s = shapes.shape[code & 63];
+                if (!s.owns(double(qc), double(qr), q, E)) return false;
+                owner = &tris[qd.tri[slot]];
+                owner_shape = &s;
                 return true;
               };
               auto try_quad = [&](int qr, int qc, bool first_guess) {
                 if (qr < 0 || qc < 0) return false;
                 const Quad& qd = quad[std::size_t(qr) * QW + qc];
                 const int first = first_guess ? 0 : 1;
-                return try_triangle(qd.tri[first]) || try_triangle(qd.tri[1 - first]);
+                return try_triangle(qd, first, qr, qc) || try_triangle(qd, 1 - first, qr, qc);
               };
               const Quad& here = quad[std::size_t(row) * QW + col];
               const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
@@ -685,7 +762,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               if (beyond_ramp(plane, ramp, options)) continue;
               const double cosine = sight_cosine(owner->normal, X - centre);
               VoxelSample v;
-              if (!voxel_sample(frame, owner->idx, owner->own, E, plane, cosine, ramp, options, &v)) continue;
+              if (!voxel_sample(frame, owner->idx, *owner_shape, E, plane, cosine, ramp, options, &v)) continue;
               if ((ia >> log) != run) {
                 std::int64_t idx[3];
                 idx[ax] = ia;
