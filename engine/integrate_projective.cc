@@ -392,39 +392,72 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     if (!(n.norm() > 1e-6)) n = Vector3d::UnitZ();  // any direction is a valid bound
     n.normalize();
     p.tile_normal[tile] = n;
-    for_each_triangle([&](const GridTriangle& g) {
-      double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin;
-      // A voxel X at ray distance d in [-behind ramp, ramp] from the triangle (d > 0 towards the
-      // sensor) lies at X = P - d dir, P on the triangle and dir its unit line of sight: its
-      // camera depth is z(P) - d dir_z with 0 < dir_z <= 1, its offset along n is n.P - d n.dir.
-      // Per vertex: offset s along n and, per unit ramp, the offsets below and above it. The
-      // slab takes the least s plus the least offset below (the greatest plus the greatest above)
-      // for every level at once: looser than per vertex by the ramp times the spread of the three
-      // lines of sight (a pixel's angle), which the margins dwarf.
-      double s_min = std::numeric_limits<double>::infinity(), s_max = -s_min;
-      double below = s_min, above = -s_min;
-      for (int k = 0; k < 3; ++k) {
-        const std::uint32_t i = g.idx[k];
-        const double z = p.depth[i];
-        zmin = std::min(zmin, z);
-        zmax = std::max(zmax, z);
-        const double s = n.dot(frame.position[i].cast<double>());
-        s_min = std::min(s_min, s);
-        s_max = std::max(s_max, s);
+    // A voxel X at ray distance d in [-behind ramp, ramp] from a triangle (d > 0 towards the
+    // sensor) lies at X = P - d dir, P on the triangle and dir its unit line of sight: its camera
+    // depth is z(P) - d dir_z with 0 < dir_z <= 1, its offset along n is n.P - d n.dir. Per vertex
+    // (once, though up to six of the tile's triangles share it): camera depth z, offset s along n
+    // and, per unit ramp, the offsets below and above it. The slab of a level takes the least s
+    // plus the least offset below (the greatest plus the greatest above) over all the triangles
+    // of one level of equation 1 at once: looser than per triangle by the ramp times the spread of
+    // the tile's lines of sight (a few pixels' angle), which the margins dwarf.
+    constexpr int kSide = kTile + 2;  // vertices per side: the tile's quads and the ones before
+    const int vw = qc1 - qc0 + 1;
+    double vz[kSide * kSide], vs[kSide * kSide], vbelow[kSide * kSide], vabove[kSide * kSide];
+    for (int r = qr0; r <= qr1; ++r)
+      for (int c = qc0; c <= qc1; ++c) {
+        const std::size_t i = std::size_t(r) * W + c;
+        const int v = (r - qr0) * vw + (c - qc0);
         const double sd = n.dot(p.sight[i]);
-        below = std::min(below, std::min(-sd, options.behind * sd));
-        above = std::max(above, std::max(-sd, options.behind * sd));
+        vz[v] = p.depth[i];
+        vs[v] = n.dot(frame.position[i].cast<double>());
+        vbelow[v] = std::min(-sd, options.behind * sd);
+        vabove[v] = std::max(-sd, options.behind * sd);
       }
-      for (int l = g.coarsest; l <= g.level; ++l) {
-        const double ramp = p.ramp[g.level][l];
+    struct Extent {
+      double zmin, zmax, smin, smax, below, above;
+      int coarsest;
+    };
+    Extent extent[L];
+    static_assert(L <= 32, "levels_seen holds a bit per level");
+    std::uint32_t levels_seen = 0;  // bit lt: some triangle of level lt
+    for (int r = qr0; r < qr1; ++r)
+      for (int c = qc0; c < qc1; ++c) {
+        const Quad& qd = p.quad[std::size_t(r) * QW + c];
+        for (int slot = 0; slot < 2; ++slot) {
+          if (qd.tri[slot] < 0) continue;
+          const GridTriangle& g = tris[qd.tri[slot]];
+          if (!g.ok) continue;
+          Extent& e = extent[g.level];
+          if (!(levels_seen >> g.level & 1)) {
+            const double inf = std::numeric_limits<double>::infinity();
+            e = Extent{inf, -inf, inf, -inf, inf, -inf, g.coarsest};
+            levels_seen |= 1u << g.level;
+          }
+          for (int k = 0; k < 3; ++k) {
+            const int corner = (qd.shape[slot] >> (2 * k)) & 3;
+            const int v = (r - qr0 + (corner >> 1)) * vw + (c - qc0 + (corner & 1));
+            e.zmin = std::min(e.zmin, vz[v]);
+            e.zmax = std::max(e.zmax, vz[v]);
+            e.smin = std::min(e.smin, vs[v]);
+            e.smax = std::max(e.smax, vs[v]);
+            e.below = std::min(e.below, vbelow[v]);
+            e.above = std::max(e.above, vabove[v]);
+          }
+        }
+      }
+    for (int lt = 0; lt < L; ++lt) {
+      if (!(levels_seen >> lt & 1)) continue;
+      const Extent& e = extent[lt];
+      for (int l = e.coarsest; l <= lt; ++l) {
+        const double ramp = p.ramp[lt][l];
         TileLevel& t = p.tile_level(tile, l);
-        t.zmin = std::min(t.zmin, zmin);
-        t.zmax = std::max(t.zmax, zmax);
+        t.zmin = std::min(t.zmin, e.zmin);
+        t.zmax = std::max(t.zmax, e.zmax);
         t.ramp = std::max(t.ramp, ramp);
-        t.smin = std::min(t.smin, s_min + ramp * below);
-        t.smax = std::max(t.smax, s_max + ramp * above);
+        t.smin = std::min(t.smin, e.smin + ramp * e.below);
+        t.smax = std::max(t.smax, e.smax + ramp * e.above);
       }
-    });
+    }
   });
   return true;
 }
