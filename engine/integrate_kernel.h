@@ -6,8 +6,12 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "engine/depth_frame.h"
 #include "engine/hsdf_math.h"
@@ -155,6 +159,48 @@ inline std::uint8_t colour_byte(double v) {
   return std::uint8_t(i + (v - double(i) >= 0.5 ? 1 : 0));
 }
 
+// The colour at barycentric coordinates `bary` of vertex colours c[0..2], each channel
+// colour_byte((bary0 c0 + bary1 c1) + bary2 c2): the reference for interpolate_colour.
+inline void interpolate_colour_scalar(const double bary[3], const Rgb8* const c[3],
+                                      std::uint8_t out[3]) {
+  for (int k = 0; k < 3; ++k) out[k] = colour_byte(bary[0] * (*c[0])[k] + bary[1] * (*c[1])[k] + bary[2] * (*c[2])[k]);
+}
+
+#if defined(__SSE2__)
+// Channels 0 and 1 in one register, 2 in another: the same products and sums, lane by lane, as
+// interpolate_colour_scalar (so the same bits), in about half the instructions; this runs for
+// every contribution of a coloured depth map.
+inline void interpolate_colour(const double bary[3], const Rgb8* const c[3], std::uint8_t out[3]) {
+  const __m128i zero = _mm_setzero_si128();
+  __m128d lo = _mm_setzero_pd(), hi = _mm_setzero_pd();
+  for (int j = 0; j < 3; ++j) {
+    const Rgb8& cj = *c[j];
+    const int bytes = int(cj[0]) | (int(cj[1]) << 8) | (int(cj[2]) << 16);
+    const __m128i i32 = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(bytes), zero), zero);
+    const __m128d b = _mm_set1_pd(bary[j]);
+    const __m128d plo = _mm_mul_pd(b, _mm_cvtepi32_pd(i32)), phi = _mm_mul_pd(b, _mm_cvtepi32_pd(_mm_srli_si128(i32, 8)));
+    lo = j == 0 ? plo : _mm_add_pd(lo, plo);
+    hi = j == 0 ? phi : _mm_add_pd(hi, phi);
+  }
+  // colour_byte per lane: max/min clamp (a NaN or -0 becomes 0, as !(v > 0) does), truncate, and
+  // add one where the fraction is at least 0.5.
+  auto bytes_of = [](__m128d v) {
+    v = _mm_min_pd(_mm_max_pd(v, _mm_setzero_pd()), _mm_set1_pd(255.0));
+    const __m128i i = _mm_cvttpd_epi32(v);
+    const __m128d up = _mm_cmpge_pd(_mm_sub_pd(v, _mm_cvtepi32_pd(i)), _mm_set1_pd(0.5));
+    return _mm_sub_epi32(i, _mm_shuffle_epi32(_mm_castpd_si128(up), _MM_SHUFFLE(3, 3, 2, 0)));
+  };
+  const __m128i a = bytes_of(lo), b = bytes_of(hi);
+  out[0] = std::uint8_t(_mm_cvtsi128_si32(a));
+  out[1] = std::uint8_t(_mm_cvtsi128_si32(_mm_srli_si128(a, 4)));
+  out[2] = std::uint8_t(_mm_cvtsi128_si32(b));
+}
+#else
+inline void interpolate_colour(const double bary[3], const Rgb8* const c[3], std::uint8_t out[3]) {
+  interpolate_colour_scalar(bary, c, out);
+}
+#endif
+
 // Signed distance and weight of a voxel whose line of sight the triangle `own` owns with edge
 // functions E; `plane` = normal . (P0 - X), `cosine` = sight_cosine(normal, line of sight). False
 // if the voxel gets nothing.
@@ -182,11 +228,8 @@ inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], co
   out->weight = float(weight);
   out->has_colour = !frame.colour.empty();
   if (out->has_colour) {
-    for (int k = 0; k < 3; ++k) {
-      const double v = bary[0] * frame.colour[idx[0]][k] + bary[1] * frame.colour[idx[1]][k] +
-                       bary[2] * frame.colour[idx[2]][k];
-      out->colour[k] = colour_byte(v);
-    }
+    const Rgb8* const c[3] = {&frame.colour[idx[0]], &frame.colour[idx[1]], &frame.colour[idx[2]]};
+    interpolate_colour(bary, c, out->colour);
   } else {
     out->colour[0] = out->colour[1] = out->colour[2] = 0;
   }

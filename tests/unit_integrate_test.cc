@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 #include <set>
 
 #include "engine/depth_frame.h"
@@ -277,10 +278,6 @@ TEST(Integrate, PrismEnumerationMatchesBruteForce) {
 
 namespace sf {
 
-// The voxel-centric enumeration must give the very field the prism enumeration gives: the same
-// voxels with bit-identical distances, weights and colours. The scene is made to stress it: an
-// oblique camera over a wavy surface with a depth step (dropped triangles, levels changing across
-// tiles), confidences and colours, several levels and a tile size that does not divide the image.
 TEST(IntegrateKernel, ColourByteRoundsHalfAwayFromZeroAndClamps) {
   EXPECT_EQ(integrate_detail::colour_byte(2.5), 3);
   EXPECT_EQ(integrate_detail::colour_byte(2.4999999999999996), 2);
@@ -296,6 +293,61 @@ TEST(IntegrateKernel, ColourByteRoundsHalfAwayFromZeroAndClamps) {
   }
 }
 
+// The kernel's colour arithmetic in SIMD lanes must give the bits of the scalar reference: random
+// barycentric coordinates and colours, ties at .5, clamping at both ends, NaN and -0.
+TEST(IntegrateKernel, ColourInLanesEqualsTheScalarReference) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> b(-0.2, 1.2);
+  std::uniform_int_distribution<int> byte(0, 255);
+  auto check = [](const double bary[3], const Rgb8 c[3]) {
+    const Rgb8* const cp[3] = {&c[0], &c[1], &c[2]};
+    std::uint8_t lanes[3], scalar[3];
+    integrate_detail::interpolate_colour(bary, cp, lanes);
+    integrate_detail::interpolate_colour_scalar(bary, cp, scalar);
+    for (int k = 0; k < 3; ++k)
+      ASSERT_EQ(int(lanes[k]), int(scalar[k])) << bary[0] << " " << bary[1] << " " << bary[2] << " channel " << k;
+  };
+  for (int i = 0; i < 200000; ++i) {
+    const double bary[3] = {b(rng), b(rng), b(rng)};
+    const Rgb8 c[3] = {{std::uint8_t(byte(rng)), std::uint8_t(byte(rng)), std::uint8_t(byte(rng))},
+                       {std::uint8_t(byte(rng)), std::uint8_t(byte(rng)), std::uint8_t(byte(rng))},
+                       {std::uint8_t(byte(rng)), std::uint8_t(byte(rng)), std::uint8_t(byte(rng))}};
+    check(bary, c);
+  }
+  const Rgb8 c[3] = {{1, 254, 255}, {2, 255, 255}, {0, 0, 255}};
+  const double nan = std::nan("");
+  const double cases[][3] = {{0.5, 0.5, 0}, {1, 0, 0}, {0, 0, 1}, {-0.0, 0, 0}, {nan, 0, 0}, {2, 2, 2}, {-1, 0, 0},
+                             {0.25, 0.25, 0.5}, {0.49999999999999994, 0, 0}};
+  for (const auto& bary : cases) check(bary, c);
+  std::uint8_t out[3];
+  const Rgb8* const cp[3] = {&c[0], &c[1], &c[2]};
+  const double half[3] = {0.5, 0.5, 0};
+  integrate_detail::interpolate_colour(half, cp, out);  // 1.5 -> 2, 254.5 -> 255, 255
+  EXPECT_EQ(int(out[0]), 2);
+  EXPECT_EQ(int(out[1]), 255);
+  EXPECT_EQ(int(out[2]), 255);
+
+  std::uniform_real_distribution<float> w(0.0f, 4.0f);
+  std::uniform_int_distribution<int> fixed(0, 65535);
+  for (int i = 0; i < 200000; ++i) {
+    VoxelData lanes;
+    for (auto& f : lanes.colour_fixed) f = std::uint16_t(fixed(rng));
+    lanes.colour_share = std::uint16_t(fixed(rng));
+    VoxelData scalar = lanes;
+    const std::uint8_t colour[3] = {std::uint8_t(byte(rng)), std::uint8_t(byte(rng)), std::uint8_t(byte(rng))};
+    const float before = i % 17 == 0 ? 0.0f : w(rng), weight = w(rng);
+    const float inv = i % 23 == 0 ? std::nanf("") : 1.0f / (before + weight);
+    blend_colour(lanes, before, weight, colour, inv);
+    blend_colour_scalar(scalar, before, weight, colour, inv);
+    for (int k = 0; k < 3; ++k) ASSERT_EQ(lanes.colour_fixed[k], scalar.colour_fixed[k]) << i << " channel " << k;
+    ASSERT_EQ(lanes.colour_share, scalar.colour_share);
+  }
+}
+
+// The voxel-centric enumeration must give the very field the prism enumeration gives: the same
+// voxels with bit-identical distances, weights and colours. The scene is made to stress it: an
+// oblique camera over a wavy surface with a depth step (dropped triangles, levels changing across
+// tiles), confidences and colours, several levels and a tile size that does not divide the image.
 TEST(Integrate, VoxelCentricEnumerationEqualsPrisms) {
   DepthFrame f;
   f.name = "wavy";
