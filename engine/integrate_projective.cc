@@ -608,6 +608,33 @@ class RowPrefilter {
   double slack_;
 };
 
+// A candidate voxel of a lattice row on its way through the kernel's phases.
+struct Candidate {
+  Vector3d X;                     // its centre
+  Vector2d q;                     // its projection, pixels
+  double E[3];                    // the owner's edge functions at q
+  const QuadShape* shape;         // the owner's shape
+  std::int32_t owner;             // the owner's index in Prepared::tris
+  std::int32_t col, row;          // the pixel quad q falls in
+  std::int32_t ia, ic;            // lattice indices along the column's axis and the row's
+  VoxelSample sample;
+};
+
+// The candidates of a lattice row, and which of them are still in after the owner and the sample
+// phases (indices, so that no candidate is copied). Never shrinks; its elements are written
+// before they are read, so growth is the only zeroing.
+struct RowBatch {
+  std::vector<Candidate> cand;
+  std::vector<std::uint32_t> owned, sampled;
+  std::size_t size() const { return cand.size(); }
+  void grow(std::size_t n) {
+    n = std::max<std::size_t>(2 * n, 256);
+    cand.resize(n);
+    owned.resize(n);
+    sampled.resize(n);
+  }
+};
+
 bool has_prisms(const Prepared& p, int tile, int level) {
   const TileLevel& tl = p.tile_level(tile, level);
   return tl.zmin <= tl.zmax;
@@ -680,6 +707,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
     tbb::parallel_for(chunk, [&](const tbb::blocked_range<std::size_t>& range) {
       std::size_t local = 0;
       BlockCache cache(map);
+      RowBatch batch;  // one lattice row's candidate voxels
       for (std::size_t it = range.begin(); it != range.end(); ++it) {
         const int level = items[it].level, tile = items[it].tile;
         ItemFrustum fr = item_frustum(p, root, tile, level);
@@ -718,6 +746,14 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           if (!prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
           double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
           for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
+          // The row's candidates go through the kernel in phases, each a loop over all of them:
+          // projection, owner, sample, write. A candidate's work is one long chain of dependent
+          // steps (a division, a floor, the quad, the shape, the owner's record, a square root,
+          // two more divisions, the voxel), longer than the core's window of instructions, so
+          // done candidate by candidate the chains ran one after another; in short loops the
+          // chains of neighbouring candidates overlap. Each voxel gets the same arithmetic either
+          // way, and at most one contribution per depth map, so the field is the same.
+          std::size_t n = 0;  // candidates in the batch
           for (std::int64_t ic = ic0; ic <= ic1; ++ic) {
             Vector3d base;
             base[ax] = root.min[ax];
@@ -744,10 +780,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
             camera_terms(R, base, bx, terms);
             camera_terms(R, base, cx, terms);
-            const std::uint32_t column_offset = ((std::uint32_t(ib) & in_block) << (bx * log)) |
-                                                ((std::uint32_t(ic) & in_block) << (cx * log));
-            std::int64_t run = -1;  // ia >> log of the block in hand
-            VoxelData* run_voxels = nullptr;
+            if (i1 >= i0 && n + std::size_t(i1 - i0 + 1) > batch.size()) batch.grow(n + std::size_t(i1 - i0 + 1));
+            // Phase 1: project; keep the voxels whose quad is this tile's.
             for (std::int64_t ia = i0; ia <= i1; ++ia) {
               Vector3d X = base;
               X[ax] += h * double(ia);
@@ -757,59 +791,88 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               const Vector2d q = pixel_of(sensor, xs);
               const int col = fast_floor(q.x() - 0.5), row = fast_floor(q.y() - 0.5);
               if (!(col >= c0 && col < c1 && row >= r0 && row < r1)) continue;  // another tile's voxel
-              // The owner: one of the quad's triangles (the likelier first), or, on the quad's left
-              // or top border, one of the neighbouring quads' (edge functions give a shared edge to
-              // one side only). Trying the previous voxel's owner first, as this once did, saves
-              // nothing: it owns the next only a third of the time (a step along a column moves
-              // the projection up to 0.8 pixel), and the extra test and its unpredictable branch
-              // cost more (bench/README.md, session 31).
-              const GridTriangle* owner = nullptr;
-              const QuadShape* owner_shape = nullptr;
-              double E[3] = {0, 0, 0};
-              auto try_triangle = [&](const Quad& qd, int slot, int qr, int qc) {
-                const std::uint8_t code = qd.shape[slot];
-                if (!(code & Quad::kUsable)) return false;
-                const QuadShape& s = shapes.shape[code & 63];
-                if (!s.owns(double(qc), double(qr), q, E)) return false;
-                owner = &tris[qd.tri[slot]];
-                owner_shape = &s;
-                return true;
-              };
-              auto try_quad = [&](int qr, int qc, bool first_guess) {
-                if (qr < 0 || qc < 0) return false;
-                const Quad& qd = quad[std::size_t(qr) * QW + qc];
-                const int first = first_guess ? 0 : 1;
-                return try_triangle(qd, first, qr, qc) || try_triangle(qd, 1 - first, qr, qc);
-              };
-              const Quad& here = quad[std::size_t(row) * QW + col];
-              const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
-              if (!try_quad(row, col, guess)) {
-                const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
-                if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
-                      (left && top && try_quad(row - 1, col - 1, true))))
-                  continue;
-              }
-              if (level < owner->coarsest || level > owner->level) continue;
-              const double ramp = p.ramp[owner->level][level];
-              const double plane = owner->normal.dot(owner->P0.cast<double>() - X);
-              if (beyond_ramp(plane, ramp, options)) continue;
-              const double cosine = sight_cosine(owner->normal, X - centre);
-              VoxelSample v;
-              if (!voxel_sample(frame, owner->idx, *owner_shape, E, plane, cosine, ramp, options, &v)) continue;
-              if ((ia >> log) != run) {
-                std::int64_t idx[3];
-                idx[ax] = ia;
-                idx[bx] = ib;
-                idx[cx] = ic;
-                const VoxelKey key =
-                    VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
-                run_voxels = cache.block(key, block_origin(key, brick_level));
-                run = ia >> log;
-              }
-              VoxelData& voxel = run_voxels[column_offset | ((std::uint32_t(ia) & in_block) << shift_a)];
-              accumulate(voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
-              ++local;
+              Candidate& cand = batch.cand[n++];
+              cand.X = X;
+              cand.q = q;
+              cand.col = col, cand.row = row;
+              cand.ia = std::int32_t(ia), cand.ic = std::int32_t(ic);
             }
+          }
+          // Phase 2: the owner, one of the quad's triangles (the likelier first), or, on the
+          // quad's left or top border, one of the neighbouring quads' (edge functions give a
+          // shared edge to one side only). Trying the previous voxel's owner first, as this once
+          // did, saves nothing: it owns the next only a third of the time (a step along a column
+          // moves the projection up to 0.8 pixel), and the extra test and its unpredictable
+          // branch cost more (bench/README.md, session 31).
+          std::size_t owned = 0;
+          for (std::uint32_t k = 0; k < n; ++k) {
+            Candidate& cand = batch.cand[k];
+            const Vector2d q = cand.q;
+            const int col = cand.col, row = cand.row;
+            auto try_triangle = [&](const Quad& qd, int slot, int qr, int qc) {
+              const std::uint8_t code = qd.shape[slot];
+              if (!(code & Quad::kUsable)) return false;
+              const QuadShape& s = shapes.shape[code & 63];
+              if (!s.owns(double(qc), double(qr), q, cand.E)) return false;
+              cand.owner = qd.tri[slot];
+              cand.shape = &s;
+              return true;
+            };
+            auto try_quad = [&](int qr, int qc, bool first_guess) {
+              if (qr < 0 || qc < 0) return false;
+              const Quad& qd = quad[std::size_t(qr) * QW + qc];
+              const int first = first_guess ? 0 : 1;
+              return try_triangle(qd, first, qr, qc) || try_triangle(qd, 1 - first, qr, qc);
+            };
+            const Quad& here = quad[std::size_t(row) * QW + col];
+            const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
+            if (!try_quad(row, col, guess)) {
+              const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
+              if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
+                    (left && top && try_quad(row - 1, col - 1, true))))
+                continue;
+            }
+            batch.owned[owned++] = k;
+          }
+          // Phase 3: distance, weight and colour.
+          std::size_t sampled = 0;
+          for (std::size_t j = 0; j < owned; ++j) {
+            const std::uint32_t k = batch.owned[j];
+            Candidate& cand = batch.cand[k];
+            const GridTriangle& g = tris[cand.owner];
+            if (level < g.coarsest || level > g.level) continue;
+            const double ramp = p.ramp[g.level][level];
+            const double plane = g.normal.dot(g.P0.cast<double>() - cand.X);
+            if (beyond_ramp(plane, ramp, options)) continue;
+            const double cosine = sight_cosine(g.normal, cand.X - centre);
+            if (!voxel_sample(frame, g.idx, *cand.shape, cand.E, plane, cosine, ramp, options, &cand.sample)) continue;
+            batch.sampled[sampled++] = k;
+          }
+          // Phase 4: the writes. A column crosses a block every 2^log voxels, so a voxel's block
+          // is mostly the one in hand, and the key, its origin and the block cache are consulted
+          // once per block.
+          std::int64_t run_ic = -1, run = -1;  // column and ia >> log of the block in hand
+          VoxelData* run_voxels = nullptr;
+          std::uint32_t column_offset = 0;
+          for (std::size_t j = 0; j < sampled; ++j) {
+            const Candidate& cand = batch.cand[batch.sampled[j]];
+            const std::int64_t ia = cand.ia, ic = cand.ic;
+            if (ic != run_ic || (ia >> log) != run) {
+              std::int64_t idx[3];
+              idx[ax] = ia;
+              idx[bx] = ib;
+              idx[cx] = ic;
+              const VoxelKey key =
+                  VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
+              run_voxels = cache.block(key, block_origin(key, brick_level));
+              run = ia >> log;
+              run_ic = ic;
+              column_offset = ((std::uint32_t(ib) & in_block) << (bx * log)) | ((std::uint32_t(ic) & in_block) << (cx * log));
+            }
+            VoxelData& voxel = run_voxels[column_offset | ((std::uint32_t(ia) & in_block) << shift_a)];
+            const VoxelSample& v = cand.sample;
+            accumulate(voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
+            ++local;
           }
         }
       }
