@@ -618,6 +618,7 @@ struct Candidate {
   std::int32_t col, row;          // the pixel quad q falls in
   std::int32_t ia, ic;            // lattice indices along the column's axis and the row's
   VoxelSample sample;
+  VoxelData* voxel;               // where the sample goes
 };
 
 // The candidates of a lattice row, and which of them are still in after the owner and the sample
@@ -747,7 +748,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
           for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
           // The row's candidates go through the kernel in phases, each a loop over all of them:
-          // projection, owner, sample, write. A candidate's work is one long chain of dependent
+          // projection, owner, sample, voxel, write. A candidate's work is one long chain of dependent
           // steps (a division, a floor, the quad, the shape, the owner's record, a square root,
           // two more divisions, the voxel), longer than the core's window of instructions, so
           // done candidate by candidate the chains ran one after another; in short loops the
@@ -832,6 +833,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
                     (left && top && try_quad(row - 1, col - 1, true))))
                 continue;
             }
+            __builtin_prefetch(&tris[cand.owner]);  // read in the next phase
             batch.owned[owned++] = k;
           }
           // Phase 3: distance, weight and colour.
@@ -848,14 +850,14 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             if (!voxel_sample(frame, g.idx, *cand.shape, cand.E, plane, cosine, ramp, options, &cand.sample)) continue;
             batch.sampled[sampled++] = k;
           }
-          // Phase 4: the writes. A column crosses a block every 2^log voxels, so a voxel's block
-          // is mostly the one in hand, and the key, its origin and the block cache are consulted
-          // once per block.
+          // Phase 4: the voxels, each asked for ahead of its write. A column crosses a block every
+          // 2^log voxels, so a voxel's block is mostly the one in hand, and the key, its origin
+          // and the block cache are consulted once per block.
           std::int64_t run_ic = -1, run = -1;  // column and ia >> log of the block in hand
           VoxelData* run_voxels = nullptr;
           std::uint32_t column_offset = 0;
           for (std::size_t j = 0; j < sampled; ++j) {
-            const Candidate& cand = batch.cand[batch.sampled[j]];
+            Candidate& cand = batch.cand[batch.sampled[j]];
             const std::int64_t ia = cand.ia, ic = cand.ic;
             if (ic != run_ic || (ia >> log) != run) {
               std::int64_t idx[3];
@@ -869,11 +871,16 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               run_ic = ic;
               column_offset = ((std::uint32_t(ib) & in_block) << (bx * log)) | ((std::uint32_t(ic) & in_block) << (cx * log));
             }
-            VoxelData& voxel = run_voxels[column_offset | ((std::uint32_t(ia) & in_block) << shift_a)];
-            const VoxelSample& v = cand.sample;
-            accumulate(voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
-            ++local;
+            cand.voxel = &run_voxels[column_offset | ((std::uint32_t(ia) & in_block) << shift_a)];
+            __builtin_prefetch(cand.voxel, 1);
           }
+          // Phase 5: the writes.
+          for (std::size_t j = 0; j < sampled; ++j) {
+            const Candidate& cand = batch.cand[batch.sampled[j]];
+            const VoxelSample& v = cand.sample;
+            accumulate(*cand.voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
+          }
+          local += sampled;
         }
       }
       contributions.fetch_add(local, std::memory_order_relaxed);
