@@ -4,10 +4,16 @@
 # prints the medians of wall time, the bounds / plan / integrate stages (from --stats), minor page
 # faults and peak RSS, and whether the two binaries' tiles are byte-identical (sha256 of each
 # brick's tile; the generation numbers in tile names follow the plan's order and are left out).
-# Usage: bench/integrate_ab.sh INPUT CONFIG RUNS BIN_A BIN_B [fuse args...]
+# With CORE=N in the environment every run is pinned to core N (taskset), and the fastest run of
+# each binary is printed too: one core's runs close together drift less than the two cores
+# of bench/pair_ab.sh differ on some machines (bench/README.md, session 32).
+# Usage: [CORE=N] bench/integrate_ab.sh INPUT CONFIG RUNS BIN_A BIN_B [fuse args...]
 #   e.g. bench/integrate_ab.sh ../shared/data/7scenes_50frames configs/rgbd.toml 3 old/scalefuse build/bin/scalefuse --memory-limit 1.5G
+#        CORE=1 bench/integrate_ab.sh /work/q/igea configs/mvs.toml 6 old/scalefuse build/bin/scalefuse --threads 1
 set -euo pipefail
-[ $# -ge 5 ] || { sed -n 2,8p "$0" >&2; exit 2; }
+[ $# -ge 5 ] || { sed -n 2,12p "$0" >&2; exit 2; }
+PIN=()
+[ -n "${CORE:-}" ] && PIN=(taskset -c "$CORE")
 INPUT=$1 CONFIG=$2 RUNS=$3 A=$4 B=$5
 shift 5
 WORK=$(mktemp -d /tmp/scalefuse-ab.XXXXXX)
@@ -17,7 +23,7 @@ for i in $(seq "$RUNS"); do
     bin=$A
     [ $side = B ] && bin=$B
     rm -rf "$WORK/job"
-    /usr/bin/time -f "%e %R %M" -o "$WORK/time" "$bin" fuse "$INPUT" --config "$CONFIG" -o "$WORK/m.ply" \
+    "${PIN[@]}" /usr/bin/time -f "%e %R %M" -o "$WORK/time" "$bin" fuse "$INPUT" --config "$CONFIG" -o "$WORK/m.ply" \
       --job "$WORK/job" --integrate-only --stats "$WORK/stats.json" -q "$@" > /dev/null
     tiles=$("$(dirname "$0")/tiles_hash.sh" "$WORK/job/tiles")
     python3 - "$WORK" "$side" "$tiles" >> "$WORK/runs" <<'PY'
@@ -39,8 +45,9 @@ for side in "AB":
     m = [statistics.median(float(x[k]) for x in r) for k in range(1, 7)]
     med[side] = m
     print(f"{side} ({names[side]}), median of {len(r)}: wall {m[0]:.2f} s, bounds {m[1]:.2f} s, plan {m[2]:.2f} s, "
-          f"integrate {m[3]:.2f} s, {m[4]:.0f} minor faults, peak RSS {m[5] / 1024:.0f} MiB")
-print("B / A: wall {:.2f}, plan {:.2f}, integrate {:.2f}".format(
+          f"integrate {m[3]:.3f} s (fastest {min(float(x[4]) for x in r):.3f} s), {m[4]:.0f} minor faults, "
+          f"peak RSS {m[5] / 1024:.0f} MiB")
+print("B / A: wall {:.3f}, plan {:.3f}, integrate {:.3f}".format(
     *(med["B"][k] / med["A"][k] if med["A"][k] else float("nan") for k in (0, 2, 3))))
 hashes = {x[7] for x in rows}
 print("tiles byte-identical across all runs" if len(hashes) == 1 else f"tiles DIFFER: {sorted(hashes)}")

@@ -48,10 +48,11 @@ struct alignas(64) GridTriangle {
 // A triangle of a pixel quad by its corners: vertex k at corner `(code >> 2k) & 3`, corners
 // numbered 0 top left, 1 top right, 2 bottom left, 3 bottom right, which is also their samples'
 // index order. Its edges are those Ownership::init sets for the triangle in the quad of column 0,
-// row 0: starts at 0.5 or 1.5, directions and opposite-vertex values of -1, 0 or 1, all exact. In the
-// quad of column c, row r the starts are c + ax and r + ay, also exact, and the directions and
-// opposite values are the same, so edge() gives the bits Ownership::edge would give for the
-// triangle's own vertices: the owner test needs only the quad, not the triangle's record.
+// row 0: starts at 0.5 or 1.5, directions of -1, 0 or 1 per axis, opposite-vertex values of -1 or
+// 1, all exact. In the quad of column c, row r the starts are c + ax and r + ay, also exact, and
+// the directions and opposite values are the same, so edge() gives the bits Ownership::edge would
+// give for the triangle's own vertices: the owner test needs only the quad, not the triangle's
+// record.
 struct QuadShape {
   double ax[3], ay[3], dx[3], dy[3], inv_opp[3];
   bool positive[3];
@@ -415,7 +416,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       }
     struct Extent {
       double zmin, zmax, smin, smax, below, above;
-      int coarsest;
+      int coarsest;  // the same for every triangle of one level of equation 1
     };
     Extent extent[L];
     static_assert(L <= 32, "levels_seen holds a bit per level");

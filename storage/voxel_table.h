@@ -19,7 +19,7 @@
 #include <cstring>
 #include <memory>
 #include <vector>
-#if defined(__SSE2__)
+#if defined(__SSE2__) && defined(__x86_64__)
 #include <emmintrin.h>
 #endif
 
@@ -77,10 +77,10 @@ inline void blend_colour_scalar(VoxelData& v, float before, float weight, const 
   for (int k = 0; k < 3; ++k)
     v.colour_fixed[k] = VoxelData::colour_to_fixed((before * v.colour(k) + weight * float(colour[k])) * inv);
 }
-#if defined(__SSE2__)
+#if defined(__SSE2__) && defined(__x86_64__)
 // The three channels in the lanes of one register: the same float products and sums as
-// blend_colour_scalar lane by lane (so the same bits), in a third of the instructions; this runs
-// for every contribution.
+// blend_colour_scalar lane by lane (so the same bits), without its branches; this runs for every
+// contribution.
 inline void blend_colour(VoxelData& v, float before, float weight, const std::uint8_t* colour, float inv) {
   const __m128i zero = _mm_setzero_si128();
   std::uint64_t fixed;  // colour_fixed[0..2] and colour_share, which lane 3 carries along unused
