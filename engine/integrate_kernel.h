@@ -59,6 +59,12 @@ struct Ownership {
 
   // The edge function of edge e at p: cross2(direction, p - start).
   double edge(int e, const Eigen::Vector2d& p) const { return dx[e] * (p.y() - ay[e]) - dy[e] * (p.x() - ax[e]); }
+  // The same for the triangle moved by (col, row), whole pixels: for a triangle of pixel centres
+  // set up in the quad at (0, 0) the moved starts col + ax, row + ay are exact, so this gives the
+  // bits of the moved triangle's own edge(), and one Ownership serves every quad of its shape.
+  double edge(int e, const Eigen::Vector2d& p, double col, double row) const {
+    return dx[e] * (p.y() - (row + ay[e])) - dy[e] * (p.x() - (col + ax[e]));
+  }
   // Sets the fields; false if the triangle is degenerate in the sensor plane.
   bool init(const Eigen::Vector2f q[3], const std::uint32_t idx[3]) {
     for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e
@@ -78,17 +84,27 @@ struct Ownership {
   // from which bary() gives the barycentric coordinates (apart, as most owned voxels of an
   // enumeration lie off the ramp and never need them).
   bool owns(const Eigen::Vector2d& p, double E[3]) const {
+    return owns_by([&](int e) { return edge(e, p); }, E);
+  }
+  // owns() for the triangle moved by (col, row), whole pixels (see edge()).
+  bool owns(const Eigen::Vector2d& p, double col, double row, double E[3]) const {
+    return owns_by([&](int e) { return edge(e, p, col, row); }, E);
+  }
+  void bary(const double E[3], double out[3]) const {
+    for (int e = 0; e < 3; ++e) out[e] = E[e] * inv_opp[e];
+  }
+
+ private:
+  template <typename EdgeAt>
+  bool owns_by(EdgeAt edge_at, double E[3]) const {
     bool inside = true;
     for (int e = 0; e < 3; ++e) {
-      E[e] = edge(e, p);
+      E[e] = edge_at(e);
       // positive ? E >= 0 : E < 0, without a branch: the side is a coin toss for the many
       // points near an edge, and a mispredicted branch costs more than both comparisons.
       inside &= (positive[e] & (E[e] >= 0)) | (!positive[e] & (E[e] < 0));
     }
     return inside;
-  }
-  void bary(const double E[3], double out[3]) const {
-    for (int e = 0; e < 3; ++e) out[e] = E[e] * inv_opp[e];
   }
 };
 
@@ -209,9 +225,7 @@ struct VoxelSample {
   std::uint8_t colour[3];
   bool has_colour;
 };
-// `Own` gives the barycentric coordinates from E (Ownership, or the projective path's quad shape).
-template <typename Own>
-inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Own& own, const double E[3],
+inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Ownership& own, const double E[3],
                          double plane, double cosine, double ramp, const IntegrateOptions& options, VoxelSample* out) {
   if (!(-cosine >= options.min_cosine)) return false;  // cosine < 0: the normal faces the sensor
   const double distance = plane / cosine;  // > 0: in front of the surface

@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -47,35 +48,12 @@ struct alignas(64) GridTriangle {
 
 // A triangle of a pixel quad by its corners: vertex k at corner `(code >> 2k) & 3`, corners
 // numbered 0 top left, 1 top right, 2 bottom left, 3 bottom right, which is also their samples'
-// index order. Its edges are those Ownership::init sets for the triangle in the quad of column 0,
-// row 0: starts at 0.5 or 1.5, directions of -1, 0 or 1 per axis, opposite-vertex values of -1 or
-// 1, all exact. In the quad of column c, row r the starts are c + ax and r + ay, also exact, and
-// the directions and opposite values are the same, so edge() gives the bits Ownership::edge would
-// give for the triangle's own vertices: the owner test needs only the quad, not the triangle's
-// record.
-struct QuadShape {
-  double ax[3], ay[3], dx[3], dy[3], inv_opp[3];
-  bool positive[3];
-  double edge(int e, double col, double row, const Vector2d& p) const {
-    return dx[e] * (p.y() - (row + ay[e])) - dy[e] * (p.x() - (col + ax[e]));
-  }
-  // Ownership::owns for the triangle of this shape in the quad at (col, row).
-  bool owns(double col, double row, const Vector2d& p, double E[3]) const {
-    bool inside = true;
-    for (int e = 0; e < 3; ++e) {
-      E[e] = edge(e, col, row, p);
-      inside &= (positive[e] & (E[e] >= 0)) | (!positive[e] & (E[e] < 0));
-    }
-    return inside;
-  }
-  void bary(const double E[3], double out[3]) const {
-    for (int e = 0; e < 3; ++e) out[e] = E[e] * inv_opp[e];
-  }
-};
-
-// Every shape code (6 bits); codes whose corners repeat are never used.
+// index order. Its ownership is set up once, in the quad at (0, 0): starts at 0.5 or 1.5,
+// directions of -1, 0 or 1 per axis, opposite-vertex values of -1 or 1, all exact, so
+// Ownership::owns moved by the quad's (column, row) gives the bits the triangle's own vertices
+// would: the owner test needs only the quad, not the triangle's record.
 struct QuadShapes {
-  QuadShape shape[64];
+  Ownership shape[64];  // by code; codes whose corners repeat are never used
   QuadShapes() {
     for (int code = 0; code < 64; ++code) {
       Eigen::Vector2f q[3];
@@ -85,17 +63,7 @@ struct QuadShapes {
         q[k] = Eigen::Vector2f(float(corner & 1) + 0.5f, float(corner >> 1) + 0.5f);
         idx[k] = std::uint32_t(corner);
       }
-      QuadShape& s = shape[code];
-      Ownership own;
-      if (idx[0] == idx[1] || idx[1] == idx[2] || idx[0] == idx[2] || !own.init(q, idx)) {
-        s = QuadShape{};
-        continue;
-      }
-      for (int e = 0; e < 3; ++e) {
-        s.ax[e] = own.ax[e], s.ay[e] = own.ay[e], s.dx[e] = own.dx[e], s.dy[e] = own.dy[e];
-        s.inv_opp[e] = own.inv_opp[e];
-        s.positive[e] = own.positive[e];
-      }
+      if (idx[0] == idx[1] || idx[1] == idx[2] || idx[0] == idx[2] || !shape[code].init(q, idx)) shape[code] = Ownership{};
     }
   }
 };
@@ -115,7 +83,7 @@ struct TileLevel {
 struct Quad {
   std::int32_t tri[2] = {-1, -1};
   std::int8_t dx = 0, dy = 0;
-  // Per slot: the triangle's shape code (QuadShape), plus kUsable once it can own voxels.
+  // Per slot: the triangle's shape code (QuadShapes), plus kUsable once it can own voxels.
   std::uint8_t shape[2] = {0, 0};
   static constexpr std::uint8_t kUsable = 64;
 };
@@ -246,15 +214,19 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     } else if (qd.tri[1] < 0) {
       qd.tri[1] = std::int32_t(t);
       qd.shape[1] = shape;
-      // Each triangle's vertex that the other lacks.
-      auto lone = [&](const FrameTriangle& a, const FrameTriangle& b) {
-        for (std::uint32_t i : a)
-          if (i != b[0] && i != b[1] && i != b[2]) return i;
-        return a[0];
+      // Each triangle's corner that the other lacks (its vertex 0 if none), from the shapes.
+      auto corners = [](std::uint8_t code) {
+        unsigned m = 0;
+        for (int k = 0; k < 3; ++k) m |= 1u << ((code >> (2 * k)) & 3);
+        return m;
       };
-      const std::uint32_t a = lone(triangles[qd.tri[0]], tri), b = lone(tri, triangles[qd.tri[0]]);
-      qd.dx = std::int8_t(int(a % std::uint32_t(W)) - int(b % std::uint32_t(W)));
-      qd.dy = std::int8_t(int(a / std::uint32_t(W)) - int(b / std::uint32_t(W)));
+      auto lone = [&](std::uint8_t a, std::uint8_t b) {
+        const unsigned only = corners(a) & ~corners(b);
+        return only != 0 ? std::countr_zero(only) : int(a & 3);
+      };
+      const int a = lone(qd.shape[0], shape), b = lone(shape, qd.shape[0]);
+      qd.dx = std::int8_t((a & 1) - (b & 1));
+      qd.dy = std::int8_t((a >> 1) - (b >> 1));
     } else {
       return false;
     }
@@ -614,7 +586,7 @@ struct Candidate {
   Vector3d X;                     // its centre
   Vector2d q;                     // its projection, pixels
   double E[3];                    // the owner's edge functions at q
-  const QuadShape* shape;         // the owner's shape
+  const Ownership* shape;         // the owner's shape (moved by the quad's column and row)
   std::int32_t owner;             // the owner's index in Prepared::tris
   std::int32_t col, row;          // the pixel quad q falls in
   std::int32_t ia, ic;            // lattice indices along the column's axis and the row's
@@ -737,9 +709,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           else
             upper[n_upper++] = k;
         }
-        // Blocks of this level: 2^log voxels per axis, x fastest (VoxelTable). A column crosses a
-        // block every 2^log voxels, so its voxels are found from the block in hand by their
-        // offset, and the key, its block origin and the block cache are consulted once per block.
+        // Blocks of this level: 2^log voxels per axis, x fastest (VoxelTable); phase 4 below
+        // finds a voxel in its block by these offsets.
         const int log = block_log(level, brick_level);
         const std::uint32_t in_block = (1u << log) - 1;
         const int shift_a = ax * log;
@@ -814,8 +785,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             auto try_triangle = [&](const Quad& qd, int slot, int qr, int qc) {
               const std::uint8_t code = qd.shape[slot];
               if (!(code & Quad::kUsable)) return false;
-              const QuadShape& s = shapes.shape[code & 63];
-              if (!s.owns(double(qc), double(qr), q, cand.E)) return false;
+              const Ownership& s = shapes.shape[code & 63];
+              if (!s.owns(q, double(qc), double(qr), cand.E)) return false;
               cand.owner = qd.tri[slot];
               cand.shape = &s;
               return true;
