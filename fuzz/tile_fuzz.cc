@@ -1,9 +1,10 @@
 // A brick tile (JOB/tiles/*.tile, docs/formats.md). With the first byte even the rest is the whole
 // file; odd, the rest after 16 bytes (block count and brick coordinates) is the raw payload and the
-// harness wraps it in a valid header, LZ4 block and checksums, so the fuzzer reaches the block
+// harness wraps it in a valid header, one LZ4 chunk and checksums, so the fuzzer reaches the block
 // decoder behind them.
 #include <lz4.h>
 
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
@@ -31,11 +32,19 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (size < 17) return 0;
     const std::uint8_t* raw = data + 17;
     const std::size_t raw_size = size - 17;
-    std::vector<char> stored(std::size_t(LZ4_compressBound(int(raw_size))) + 1);
-    const int n = raw_size ? LZ4_compress_default(reinterpret_cast<const char*>(raw), stored.data(), int(raw_size),
-                                                  int(stored.size()))
-                           : 0;
-    stored.resize(std::size_t(n));
+    // The raw payload as one chunk (format 5: u32 raw bytes, u32 stored bytes, u64 XXH3-64 of the
+    // stored bytes, LZ4 block); none for an empty one.
+    std::vector<char> stored;
+    if (raw_size > 0) {
+      stored.resize(16 + std::size_t(LZ4_compressBound(int(raw_size))));
+      const int n = LZ4_compress_default(reinterpret_cast<const char*>(raw), stored.data() + 16, int(raw_size),
+                                         int(stored.size() - 16));
+      auto* c = reinterpret_cast<unsigned char*>(stored.data());
+      put32(c, std::uint32_t(raw_size));
+      put32(c + 4, std::uint32_t(n));
+      put64(c + 8, sf::tile_checksum(sf::kTileVersion, c + 16, std::size_t(n)));
+      stored.resize(16 + std::size_t(n));
+    }
     unsigned char h[64] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
     put32(h + 8, sf::kTileVersion);
     put32(h + 12, kBrickLevel);
@@ -43,7 +52,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     put32(h + 28, get32(data + 1) % 4096);
     put64(h + 32, raw_size);
     put64(h + 40, stored.size());
-    put64(h + 48, sf::tile_checksum(sf::kTileVersion, stored.data(), stored.size()));
+    put64(h + 48, sf::tile_checksum(sf::kTileVersion, stored.data(), std::min<std::size_t>(stored.size(), 16)));
     put64(h + 56, sf::tile_checksum(sf::kTileVersion, h, 56));
     file.assign(h, h + 64);
     file.insert(file.end(), stored.begin(), stored.end());

@@ -13,6 +13,9 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <functional>
+#include <limits>
+#include <memory>
 #include <set>
 #include <string>
 #include <vector>
@@ -80,6 +83,22 @@ constexpr std::size_t record_bytes(std::uint32_t version) { return version >= 3 
 // about half of a block's voxels are absent, and compressing their zeros took a third of LZ4's
 // time at a checkpoint (bench/README.md, session 31).
 constexpr bool stores_presence(std::uint32_t version) { return version >= 4; }
+// From format 5 the raw payload is cut into chunks of whole blocks, each compressed on its own and
+// stored behind its u32 raw and u32 stored sizes. A tile is then written and read through buffers
+// of one chunk: as one LZ4 block, its raw and compressed images were two fresh mappings of the
+// whole brick's size (hundreds of MB for a large brick, most of a checkpoint's memory and a tenth
+// of its time in the kernel's page zeroing; bench/README.md, session 33), and the packed bytes
+// went to memory and back before LZ4 read them. 256 KiB stay in the core's L2 cache; LZ4's window
+// is 64 KiB, so independent chunks compress about as well as one block.
+constexpr bool stores_chunks(std::uint32_t version) { return version >= 5; }
+constexpr std::size_t kChunkRaw = std::size_t{256} << 10;      // the writer's chunks: at most this raw
+constexpr std::size_t kMaxChunkRaw = std::size_t{1} << 20;     // what a reader accepts
+// u32 raw bytes, u32 stored bytes, u64 XXH3-64 of the stored bytes: a chunk is checked before it
+// is decompressed, so damage reads as a checksum mismatch, not as whatever LZ4 or the block decoder
+// makes of it. The header's payload checksum covers the chunk headers, and through them every byte.
+constexpr std::size_t kChunkHeader = 16;
+constexpr std::size_t kMaxBlockRaw = 16 + 64 * 16;             // key, mask, 4^3 present voxels
+static_assert(kMaxBlockRaw <= kChunkRaw && kChunkRaw <= kMaxChunkRaw);
 
 // Little-endian field packing (the format is little-endian whatever the host).
 void put32(unsigned char* p, std::uint32_t v) {
@@ -127,6 +146,80 @@ void write_all(int fd, const unsigned char* data, std::size_t size, const std::f
     size -= std::size_t(n);
   }
 }
+
+void pwrite_all(int fd, const unsigned char* data, std::size_t size, off_t offset, const std::filesystem::path& path) {
+  while (size > 0) {
+    const ssize_t n = ::pwrite(fd, data, size, offset);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw_write_error(path.string(), "cannot write tile", errno);
+    }
+    data += n;
+    offset += n;
+    size -= std::size_t(n);
+  }
+}
+
+struct XXH3StateDeleter {
+  void operator()(XXH3_state_t* s) const { XXH3_freeState(s); }
+};
+using XXH3State = std::unique_ptr<XXH3_state_t, XXH3StateDeleter>;
+XXH3State new_xxh3_state() {
+  XXH3State s(XXH3_createState());
+  if (!s || XXH3_64bits_reset(s.get()) != XXH_OK) throw std::bad_alloc();
+  return s;
+}
+
+// The stored payload of a format-5 tile, streamed to `fd` chunk by chunk: blocks are packed into
+// the raw chunk until the next might not fit, then the chunk is compressed, hashed and written.
+class ChunkWriter {
+ public:
+  ChunkWriter(int fd, const std::filesystem::path& path, TileBuffers& pool)
+      : fd_(fd), path_(path), raw_(kChunkRaw, pool),
+        stored_(kChunkHeader + std::size_t(LZ4_compressBound(int(kChunkRaw))), pool), hash_(new_xxh3_state()) {}
+
+  // Room for `n` <= kMaxBlockRaw raw bytes; commit(n) after filling them.
+  unsigned char* reserve(std::size_t n) {
+    if (used_ + n > kChunkRaw) flush();
+    return raw_.data() + used_;
+  }
+  void commit(std::size_t n) {
+    used_ += n;
+    raw_bytes_ += n;
+  }
+  // Writes the last chunk; returns the payload checksum (XXH3-64 of the chunk headers).
+  std::uint64_t finish() {
+    flush();
+    return XXH3_64bits_digest(hash_.get());
+  }
+  std::uint64_t raw_bytes() const { return raw_bytes_; }
+  std::uint64_t stored_bytes() const { return stored_bytes_; }
+
+ private:
+  void flush() {
+    if (used_ == 0) return;
+    unsigned char* out = stored_.data();
+    const int packed = LZ4_compress_fast(reinterpret_cast<const char*>(raw_.data()),
+                                         reinterpret_cast<char*>(out + kChunkHeader), int(used_),
+                                         int(stored_.size() - kChunkHeader), kAcceleration);
+    if (packed <= 0) throw std::runtime_error(path_.string() + ": LZ4 compression failed");
+    put32(out, std::uint32_t(used_));
+    put32(out + 4, std::uint32_t(packed));
+    put64(out + 8, XXH3_64bits(out + kChunkHeader, std::size_t(packed)));
+    XXH3_64bits_update(hash_.get(), out, kChunkHeader);
+    const std::size_t n = kChunkHeader + std::size_t(packed);
+    write_all(fd_, out, n, path_);
+    stored_bytes_ += n;
+    used_ = 0;
+  }
+
+  int fd_;
+  const std::filesystem::path& path_;
+  PageBuffer raw_, stored_;
+  XXH3State hash_;
+  std::size_t used_ = 0;  // raw bytes in the chunk under way
+  std::uint64_t raw_bytes_ = 0, stored_bytes_ = 0;
+};
 
 }  // namespace
 
@@ -191,64 +284,55 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   std::vector<BlockView> blocks;
   voxels.for_each_block([&](VoxelKey o, int log, const VoxelData* d) { blocks.push_back({o, log, d}); });
   std::sort(blocks.begin(), blocks.end(), [](const BlockView& a, const BlockView& b) { return a.origin < b.origin; });
-  // Per block its presence mask (a block holds at most 64 voxels).
   static_assert(3 * kMaxBlockLog <= 6, "a block's presence mask is one u64");
-  std::vector<std::uint64_t> present(blocks.size(), 0);
-  std::size_t raw_size = 0;
+  if (blocks.size() > std::numeric_limits<std::uint32_t>::max())
+    throw std::length_error(path.string() + ": brick of " + std::to_string(blocks.size()) +
+                            " blocks, more than a tile's u32 count; use a finer octree.brick_level");
   constexpr std::size_t kRecord = record_bytes(kTileVersion);
-  for (std::size_t j = 0; j < blocks.size(); ++j) {
-    const std::size_t n = std::size_t{1} << (3 * blocks[j].log);
-    std::uint64_t mask = 0;
-    for (std::size_t i = 0; i < n; ++i)
-      mask |= std::uint64_t(blocks[j].data[i].weight != 0) << i;
-    present[j] = mask;
-    raw_size += 16 + std::size_t(std::popcount(mask)) * kRecord;
-  }
-  if (raw_size > std::size_t(LZ4_MAX_INPUT_SIZE))
-    throw std::length_error(path.string() + ": brick too large for one tile (" + std::to_string(raw_size) +
-                            " bytes); use a finer octree.brick_level");
-  PageBuffer raw(raw_size, pool);
-  unsigned char* p = raw.data();
-  for (std::size_t j = 0; j < blocks.size(); ++j) {
-    put64(p, blocks[j].origin.bits);
-    put64(p + 8, present[j]);
-    p += 16;
-    for (std::uint64_t m = present[j]; m != 0; m &= m - 1, p += kRecord) {
-      const VoxelData& v = blocks[j].data[std::countr_zero(m)];
-      put_float(p, v.distance);
-      put_float(p + 4, v.weight);
-      for (int c = 0; c < 3; ++c) put16(p + 8 + 2 * c, v.colour_fixed[c]);
-      put16(p + 14, v.colour_share);
-    }
-  }
-  PageBuffer stored(kHeaderBytes + std::size_t(LZ4_compressBound(int(raw_size))), pool);
-  const int packed = raw_size == 0 ? 0
-                                   : LZ4_compress_fast(reinterpret_cast<const char*>(raw.data()),
-                                                       reinterpret_cast<char*>(stored.data() + kHeaderBytes),
-                                                       int(raw_size), int(stored.size() - kHeaderBytes),
-                                                       kAcceleration);
-  if (raw_size > 0 && packed <= 0) throw std::runtime_error(path.string() + ": LZ4 compression failed");
-  unsigned char* h = stored.data();
-  std::memcpy(h, kMagic, 8);
-  put32(h + 8, kTileVersion);
-  put32(h + 12, std::uint32_t(voxels.brick_level()));
-  put32(h + 16, coord.x);
-  put32(h + 20, coord.y);
-  put32(h + 24, coord.z);
-  put32(h + 28, std::uint32_t(blocks.size()));
-  put64(h + 32, raw_size);
-  put64(h + 40, std::uint64_t(packed));
-  put64(h + 48, tile_checksum(kTileVersion, h + kHeaderBytes, std::size_t(packed)));
-  put64(h + 56, tile_checksum(kTileVersion, h, 56));
-  const std::size_t total = kHeaderBytes + std::size_t(packed);
 
-  // Temporary name in the same directory, fsync, rename, fsync the directory.
+  // Temporary name in the same directory: header last (it holds the sizes and checksums), fsync,
+  // rename, fsync the directory.
   std::filesystem::path tmp = path;
   tmp += ".tmp." + std::to_string(::getpid());
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) throw_write_error(tmp.string(), "cannot create tile", errno);
+  std::uint64_t total = 0;
   try {
-    write_all(fd, stored.data(), total, tmp);
+    ChunkWriter chunks(fd, tmp, pool);
+    if (::lseek(fd, off_t(kHeaderBytes), SEEK_SET) < 0) throw_write_error(tmp.string(), "cannot write tile", errno);
+    for (const BlockView& b : blocks) {
+      const std::size_t n = std::size_t{1} << (3 * b.log);
+      std::uint64_t mask = 0;
+      for (std::size_t i = 0; i < n; ++i) mask |= std::uint64_t(b.data[i].weight != 0) << i;
+      const std::size_t bytes = 16 + std::size_t(std::popcount(mask)) * kRecord;
+      unsigned char* p = chunks.reserve(bytes);
+      put64(p, b.origin.bits);
+      put64(p + 8, mask);
+      p += 16;
+      for (std::uint64_t m = mask; m != 0; m &= m - 1, p += kRecord) {
+        const VoxelData& v = b.data[std::countr_zero(m)];
+        put_float(p, v.distance);
+        put_float(p + 4, v.weight);
+        for (int c = 0; c < 3; ++c) put16(p + 8 + 2 * c, v.colour_fixed[c]);
+        put16(p + 14, v.colour_share);
+      }
+      chunks.commit(bytes);
+    }
+    const std::uint64_t payload_checksum = chunks.finish();
+    unsigned char h[kHeaderBytes];
+    std::memcpy(h, kMagic, 8);
+    put32(h + 8, kTileVersion);
+    put32(h + 12, std::uint32_t(voxels.brick_level()));
+    put32(h + 16, coord.x);
+    put32(h + 20, coord.y);
+    put32(h + 24, coord.z);
+    put32(h + 28, std::uint32_t(blocks.size()));
+    put64(h + 32, chunks.raw_bytes());
+    put64(h + 40, chunks.stored_bytes());
+    put64(h + 48, payload_checksum);
+    put64(h + 56, tile_checksum(kTileVersion, h, 56));
+    pwrite_all(fd, h, kHeaderBytes, 0, tmp);
+    total = kHeaderBytes + chunks.stored_bytes();
     if (durable && ::fsync(fd) != 0) throw_write_error(tmp.string(), "cannot sync tile", errno);
   } catch (...) {
     ::close(fd);
@@ -281,11 +365,89 @@ std::uint64_t tile_checksum(std::uint32_t version, const void* data, std::size_t
   return version == 1 ? fnv1a64(data, size) : XXH3_64bits(data, size);
 }
 
+namespace {
+
+// Decodes a raw payload's blocks into a table, checking everything a damaged file could get wrong.
+class BlockDecoder {
+ public:
+  BlockDecoder(std::uint32_t version, int brick_level, BrickCoord coord, std::uint32_t block_count, VoxelTable& out,
+               const std::function<InputError(const std::string&)>& bad)
+      : version_(version), brick_level_(brick_level), coord_(coord), block_count_(block_count), out_(out), bad_(bad) {}
+
+  // Decodes one block from p (end: the end of the raw bytes at hand); returns the byte after it.
+  const unsigned char* block(const unsigned char* p, const unsigned char* end) {
+    const std::uint32_t b = decoded_;
+    if (b == block_count_) throw bad_("more blocks than the header's " + std::to_string(block_count_));
+    if (end - p < 8) throw bad_("block " + std::to_string(b) + " runs past the payload");
+    const VoxelKey origin{get64(p)};
+    p += 8;
+    const int level = origin.level();
+    if ((origin.bits >> 62) != 0 || level > kMaxLevel || !valid_voxel(level, origin.x(), origin.y(), origin.z()))
+      throw bad_("block " + std::to_string(b) + " has an invalid key");
+    if (b > 0 && origin.bits <= previous_) throw bad_("blocks out of order or duplicated");
+    previous_ = origin.bits;
+    if (out_.block_origin(origin) != origin) throw bad_("block " + std::to_string(b) + " is not aligned");
+    const BrickCoord bc = brick_of(origin, brick_level_);
+    if (bc.x != coord_.x || bc.y != coord_.y || bc.z != coord_.z)
+      throw bad_("block " + std::to_string(b) + " lies outside the brick");
+    const std::size_t n = std::size_t{1} << (3 * block_log(level, brick_level_));
+    const std::uint64_t all = n == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << n) - 1;
+    std::uint64_t present = all;
+    if (stores_presence(version_)) {
+      if (end - p < 8) throw bad_("block " + std::to_string(b) + " runs past the payload");
+      present = get64(p);
+      p += 8;
+      if ((present & ~all) != 0) throw bad_("block " + std::to_string(b) + " marks voxels beyond its size");
+    }
+    const std::size_t record = record_bytes(version_);
+    if (std::size_t(end - p) < std::size_t(std::popcount(present)) * record)
+      throw bad_("block " + std::to_string(b) + " runs past the payload");
+    BlockRef ref = out_.block(origin, true);
+    for (std::uint64_t m = present; m != 0; m &= m - 1, p += record) {
+      VoxelData& v = ref.data[std::countr_zero(m)];
+      v.distance = get_float(p);
+      v.weight = get_float(p + 4);
+      if (!std::isfinite(v.distance) || !std::isfinite(v.weight))
+        throw bad_("block " + std::to_string(b) + " holds a non-finite value");
+      if (stores_presence(version_) && v.weight == 0) throw bad_("block " + std::to_string(b) + " stores an absent voxel");
+      if (version_ >= 3) {
+        for (int c = 0; c < 3; ++c) v.colour_fixed[c] = get16(p + 8 + 2 * c);
+        v.colour_share = get16(p + 14);
+      } else {
+        float colour[3];
+        for (int c = 0; c < 3; ++c) colour[c] = get_float(p + 8 + 4 * c);
+        const float colour_weight = get_float(p + 20);
+        if (!std::isfinite(colour[0]) || !std::isfinite(colour[1]) || !std::isfinite(colour[2]) ||
+            !std::isfinite(colour_weight))
+          throw bad_("block " + std::to_string(b) + " holds a non-finite value");
+        v.set_colour(colour, colour_weight);
+      }
+    }
+    ++decoded_;
+    return p;
+  }
+  std::uint32_t decoded() const { return decoded_; }
+
+ private:
+  const std::uint32_t version_;
+  const int brick_level_;
+  const BrickCoord coord_;
+  const std::uint32_t block_count_;
+  VoxelTable& out_;
+  const std::function<InputError(const std::string&)>& bad_;
+  std::uint32_t decoded_ = 0;
+  std::uint64_t previous_ = 0;  // the last block's origin key
+};
+
+}  // namespace
+
 BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuffers* buffers) {
   TileBuffers unpooled(0);
   TileBuffers& pool = buffers ? *buffers : unpooled;
   const std::string name = path.string();
-  auto bad = [&](const std::string& what) { return input_error(name, "damaged tile: " + what); };
+  const std::function<InputError(const std::string&)> bad = [&](const std::string& what) {
+    return input_error(name, "damaged tile: " + what);
+  };
   std::ifstream in(path, std::ios::binary);
   if (!in) throw input_error(name, "cannot open tile");
   in.seekg(0, std::ios::end);
@@ -313,69 +475,70 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
     throw bad("payload of " + std::to_string(file_size - kHeaderBytes) + " bytes, header says " +
               std::to_string(stored_size) + " (truncated?)");
   // LZ4 expands at most 255:1; a larger raw size is a lie, not an allocation to make.
-  if (raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE) || raw_size > 255 * stored_size + 16)
+  if ((!stores_chunks(version) && raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE)) || raw_size > 255 * stored_size + 16)
     throw bad("implausible raw size " + std::to_string(raw_size));
-  PageBuffer stored(stored_size, pool);
-  in.read(reinterpret_cast<char*>(stored.data()), std::streamsize(stored_size));
-  if (!in) throw bad("cannot read the payload");
-  if (get64(h + 48) != tile_checksum(version, stored.data(), stored.size())) throw bad("payload checksum mismatch");
-  PageBuffer raw(raw_size, pool);
-  if (raw_size > 0) {
-    const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(stored.data()), reinterpret_cast<char*>(raw.data()),
-                                      int(stored_size), int(raw_size));
-    if (n < 0 || std::uint64_t(n) != raw_size) throw bad("LZ4 payload does not decompress to its stated size");
-  }
   if (out.block_count() != 0) throw std::logic_error(name + ": read_tile into a non-empty table");
-  const unsigned char* p = raw.data();
-  const unsigned char* end = raw.data() + raw.size();
-  std::uint64_t previous = 0;
-  for (std::uint32_t b = 0; b < block_count; ++b) {
-    if (end - p < 8) throw bad("block " + std::to_string(b) + " runs past the payload");
-    const VoxelKey origin{get64(p)};
-    p += 8;
-    const int level = origin.level();
-    if ((origin.bits >> 62) != 0 || level > kMaxLevel || !valid_voxel(level, origin.x(), origin.y(), origin.z()))
-      throw bad("block " + std::to_string(b) + " has an invalid key");
-    if (b > 0 && origin.bits <= previous) throw bad("blocks out of order or duplicated");
-    previous = origin.bits;
-    if (out.block_origin(origin) != origin) throw bad("block " + std::to_string(b) + " is not aligned");
-    const BrickCoord bc = brick_of(origin, brick_level);
-    if (bc.x != coord.x || bc.y != coord.y || bc.z != coord.z) throw bad("block " + std::to_string(b) + " lies outside the brick");
-    const std::size_t n = std::size_t{1} << (3 * block_log(level, brick_level));
-    const std::uint64_t all = n == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << n) - 1;
-    std::uint64_t present = all;
-    if (stores_presence(version)) {
-      if (end - p < 8) throw bad("block " + std::to_string(b) + " runs past the payload");
-      present = get64(p);
-      p += 8;
-      if ((present & ~all) != 0) throw bad("block " + std::to_string(b) + " marks voxels beyond its size");
-    }
-    const std::size_t record = record_bytes(version);
-    if (std::size_t(end - p) < std::size_t(std::popcount(present)) * record)
-      throw bad("block " + std::to_string(b) + " runs past the payload");
-    BlockRef ref = out.block(origin, true);
-    for (std::uint64_t m = present; m != 0; m &= m - 1, p += record) {
-      VoxelData& v = ref.data[std::countr_zero(m)];
-      v.distance = get_float(p);
-      v.weight = get_float(p + 4);
-      if (!std::isfinite(v.distance) || !std::isfinite(v.weight))
-        throw bad("block " + std::to_string(b) + " holds a non-finite value");
-      if (stores_presence(version) && v.weight == 0) throw bad("block " + std::to_string(b) + " stores an absent voxel");
-      if (version >= 3) {
-        for (int c = 0; c < 3; ++c) v.colour_fixed[c] = get16(p + 8 + 2 * c);
-        v.colour_share = get16(p + 14);
-      } else {
-        float colour[3];
-        for (int c = 0; c < 3; ++c) colour[c] = get_float(p + 8 + 4 * c);
-        const float colour_weight = get_float(p + 20);
-        if (!std::isfinite(colour[0]) || !std::isfinite(colour[1]) || !std::isfinite(colour[2]) ||
-            !std::isfinite(colour_weight))
-          throw bad("block " + std::to_string(b) + " holds a non-finite value");
-        v.set_colour(colour, colour_weight);
+  BlockDecoder decoder(version, brick_level, coord, block_count, out, bad);
+  try {
+    if (stores_chunks(version)) {
+      // Chunk by chunk: each is hashed, decompressed and decoded before the next is read.
+      const bool any = stored_size > 0;  // an empty brick's tile has no chunk
+      PageBuffer stored(any ? kChunkHeader + std::size_t(LZ4_compressBound(int(kMaxChunkRaw))) : 0, pool);
+      PageBuffer raw(any ? kMaxChunkRaw : 0, pool);
+      const XXH3State hash = new_xxh3_state();
+      std::uint64_t left = stored_size, raw_seen = 0;
+      for (std::uint64_t chunk = 0; left > 0; ++chunk) {
+        const std::string which = "chunk " + std::to_string(chunk);
+        if (left < kChunkHeader) throw bad(which + " runs past the payload");
+        unsigned char* s = stored.data();
+        in.read(reinterpret_cast<char*>(s), kChunkHeader);
+        if (!in) throw bad("cannot read " + which);
+        const std::uint32_t raw_n = get32(s), stored_n = get32(s + 4);
+        if (raw_n == 0 || raw_n > kMaxChunkRaw)
+          throw bad(which + " of " + std::to_string(raw_n) + " raw bytes (1 to " + std::to_string(kMaxChunkRaw) + ")");
+        if (stored_n == 0 || stored_n > std::uint32_t(LZ4_compressBound(int(raw_n))) || stored_n > left - kChunkHeader)
+          throw bad(which + " of " + std::to_string(stored_n) + " stored bytes does not fit");
+        in.read(reinterpret_cast<char*>(s + kChunkHeader), std::streamsize(stored_n));
+        if (!in) throw bad("cannot read " + which);
+        if (XXH3_64bits(s + kChunkHeader, stored_n) != get64(s + 8)) throw bad("payload checksum mismatch");
+        XXH3_64bits_update(hash.get(), s, kChunkHeader);
+        left -= kChunkHeader + stored_n;
+        raw_seen += raw_n;
+        if (raw_seen > raw_size) throw bad("chunks hold more than the header's " + std::to_string(raw_size) + " raw bytes");
+        const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(s + kChunkHeader),
+                                          reinterpret_cast<char*>(raw.data()), int(stored_n), int(raw_n));
+        if (n < 0 || std::uint32_t(n) != raw_n) throw bad(which + " does not decompress to its stated size");
+        // A chunk holds whole blocks.
+        const unsigned char* p = raw.data();
+        const unsigned char* end = p + raw_n;
+        while (p != end) p = decoder.block(p, end);
       }
+      if (XXH3_64bits_digest(hash.get()) != get64(h + 48)) throw bad("payload checksum mismatch");
+      if (raw_seen != raw_size)
+        throw bad("chunks hold " + std::to_string(raw_seen) + " raw bytes, header says " + std::to_string(raw_size));
+      if (decoder.decoded() != block_count)
+        throw bad(std::to_string(decoder.decoded()) + " blocks, header says " + std::to_string(block_count));
+      return coord;
     }
+    // Formats 1 to 4: one LZ4 block, read and decompressed whole.
+    PageBuffer stored(stored_size, pool);
+    in.read(reinterpret_cast<char*>(stored.data()), std::streamsize(stored_size));
+    if (!in) throw bad("cannot read the payload");
+    if (get64(h + 48) != tile_checksum(version, stored.data(), stored.size())) throw bad("payload checksum mismatch");
+    PageBuffer raw(raw_size, pool);
+    if (raw_size > 0) {
+      const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(stored.data()),
+                                        reinterpret_cast<char*>(raw.data()), int(stored_size), int(raw_size));
+      if (n < 0 || std::uint64_t(n) != raw_size) throw bad("LZ4 payload does not decompress to its stated size");
+    }
+    const unsigned char* p = raw.data();
+    const unsigned char* end = raw.data() + raw.size();
+    while (decoder.decoded() < block_count) p = decoder.block(p, end);
+    if (p != end) throw bad("trailing bytes after the last block");
+  } catch (...) {
+    out.clear();  // a damaged tile leaves no half of a brick behind
+    throw;
   }
-  if (p != end) throw bad("trailing bytes after the last block");
   return coord;
 }
 

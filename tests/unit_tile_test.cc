@@ -6,6 +6,7 @@
 #include <lz4.h>
 
 #include <algorithm>
+#include <bit>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -130,9 +131,9 @@ TEST(Tile, EveryFlippedByteIsDetectedAndNamesTheTile) {
 // resumes: its tiles still read. A tile of a later format is refused by name, not as damage.
 namespace {
 
-// A tile of format 1 or 2 (24-byte voxels: six float32) or 3 (every voxel of a block in 16 bytes),
-// laid out here from the format's description rather than by this build's writer, which writes
-// only the current format. With `colour`, every voxel's record of format 1-2 carries that float
+// A tile of format 1 or 2 (24-byte voxels: six float32), 3 (every voxel of a block in 16 bytes) or
+// 4 (a presence mask per block, the present voxels in 16 bytes; one LZ4 block), laid out here from
+// the format's description rather than by this build's writer, which writes only the current format. With `colour`, every voxel's record of format 1-2 carries that float
 // colour and colour weight instead of its own.
 std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
                             const std::vector<unsigned char>& raw);
@@ -162,11 +163,15 @@ std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const Vox
   };
   for (const Block& b : blocks) {
     put(raw, b.origin.bits, 8);
+    std::uint64_t mask = 0;
+    for (std::size_t i = 0; i < (std::size_t{1} << (3 * b.log)); ++i) mask |= std::uint64_t(b.data[i].weight != 0) << i;
+    if (version == 4) put(raw, mask, 8);
     for (std::size_t i = 0; i < (std::size_t{1} << (3 * b.log)); ++i) {
       const VoxelData& v = b.data[i];
+      if (version == 4 && !(mask >> i & 1)) continue;
       put_float(v.distance);
       put_float(v.weight);
-      if (version == 3) {
+      if (version >= 3) {
         for (int c = 0; c < 3; ++c) put(raw, v.colour_fixed[c], 2);
         put(raw, v.colour_share, 2);
         continue;
@@ -216,10 +221,10 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   const auto dir = scratch_dir("tile_versions");
   VoxelTable t(3);
   fill(t, sample_voxels());
-  const auto path = dir / "v4.tile";
+  const auto path = dir / "v5.tile";
   write_tile(path, {2, 0, 2}, t);
   const std::vector<char> bytes = bytes_of(path);
-  EXPECT_EQ(bytes[8], 4);  // this build writes format 4
+  EXPECT_EQ(bytes[8], 5);  // this build writes format 5
   // Format 3's 16-byte voxels against formats 1-2's 24: the same voxels, a smaller raw payload;
   // format 4 keeps the present voxels only, behind a u64 mask per block.
   const std::vector<char> v2 = legacy_tile(2, {2, 0, 2}, t);
@@ -238,7 +243,11 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   write_bytes(dir / "v3.tile", v3);
   write_bytes(dir / "v2.tile", v2);
   write_bytes(dir / "v1.tile", legacy_tile(1, {2, 0, 2}, t));
-  for (const char* name : {"v1.tile", "v2.tile", "v3.tile", "v4.tile"}) {
+  // Format 4 is format 5's raw payload in one LZ4 block.
+  const std::vector<char> v4 = legacy_tile(4, {2, 0, 2}, t);
+  EXPECT_EQ(raw_size(v4), raw_size(bytes));
+  write_bytes(dir / "v4.tile", v4);
+  for (const char* name : {"v1.tile", "v2.tile", "v3.tile", "v4.tile", "v5.tile"}) {
     SCOPED_TRACE(name);
     VoxelTable b(3);
     read_tile(dir / name, b);
@@ -299,11 +308,11 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
     VoxelTable fresh(3);
     read_tile(dir / "relabelled3.tile", fresh);
   }, "relabelled3.tile", "damaged tile");
-  write_bytes(dir / "v5.tile", rewrite(bytes, 5, xxh3));
+  write_bytes(dir / "v6.tile", rewrite(bytes, 6, xxh3));
   expect_input_error([&] {
     VoxelTable fresh(3);
-    read_tile(dir / "v5.tile", fresh);
-  }, "v5.tile", "format version 5, this build reads 1 to 4");
+    read_tile(dir / "v6.tile", fresh);
+  }, "v6.tile", "format version 6, this build reads 1 to 5");
 }
 
 // Format 4 stores a mask of the present voxels per block: erased voxels (weight < 0) are present
@@ -456,7 +465,7 @@ TEST(Tile, ReusedBuffersChangeNoByteOfATile) {
   const std::uint64_t large_bytes = write_tile(dir / "large.tile", {2, 0, 2}, large, false, &pool);
   EXPECT_GT(large_bytes, std::uint64_t{1} << 20);  // its buffers outgrow the smallest mapping
   const std::size_t kept = pool.retained_bytes();
-  EXPECT_GE(kept, std::size_t{2} << 20);  // its raw and compressed images, both kept
+  EXPECT_GE(kept, std::size_t{2} << 20);  // its raw and compressed chunk buffers, both kept
   write_tile(dir / "small_pool.tile", {2, 0, 2}, small, false, &pool);
   write_tile(dir / "small.tile", {2, 0, 2}, small);
   EXPECT_EQ(bytes_of(dir / "small_pool.tile"), bytes_of(dir / "small.tile"));
@@ -473,6 +482,172 @@ TEST(Tile, ReusedBuffersChangeNoByteOfATile) {
     EXPECT_EQ(v->distance, d.distance);
     EXPECT_EQ(v->weight, d.weight);
   });
+}
+
+namespace {
+
+// A format-5 tile around raw chunks given one by one (LZ4, sizes, checksums all valid), laid out
+// from the format's description: each chunk behind its raw and stored sizes and the XXH3-64 of its
+// stored bytes; the header's payload checksum is that of the chunk headers.
+std::vector<char> chunked_tile(BrickCoord coord, int brick_level, std::uint32_t block_count,
+                               const std::vector<std::vector<unsigned char>>& chunks) {
+  auto put = [](std::vector<unsigned char>& out, std::uint64_t v, int n) {
+    for (int i = 0; i < n; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
+  };
+  std::vector<unsigned char> stored, chunk_headers;
+  std::uint64_t raw_bytes = 0;
+  for (const auto& raw : chunks) {
+    std::vector<char> packed(std::size_t(LZ4_compressBound(int(raw.size()))));
+    packed.resize(std::size_t(LZ4_compress_default(reinterpret_cast<const char*>(raw.data()), packed.data(),
+                                                   int(raw.size()), int(packed.size()))));
+    std::vector<unsigned char> header;
+    put(header, raw.size(), 4);
+    put(header, packed.size(), 4);
+    put(header, tile_checksum(5, packed.data(), packed.size()), 8);
+    chunk_headers.insert(chunk_headers.end(), header.begin(), header.end());
+    stored.insert(stored.end(), header.begin(), header.end());
+    stored.insert(stored.end(), packed.begin(), packed.end());
+    raw_bytes += raw.size();
+  }
+  std::vector<unsigned char> h;
+  for (char c : std::string("SFTILE1\n")) h.push_back(static_cast<unsigned char>(c));
+  put(h, 5, 4);
+  put(h, std::uint32_t(brick_level), 4);
+  put(h, coord.x, 4);
+  put(h, coord.y, 4);
+  put(h, coord.z, 4);
+  put(h, block_count, 4);
+  put(h, raw_bytes, 8);
+  put(h, stored.size(), 8);
+  put(h, tile_checksum(5, chunk_headers.data(), chunk_headers.size()), 8);
+  put(h, tile_checksum(5, h.data(), 56), 8);
+  std::vector<char> out(h.begin(), h.end());
+  out.insert(out.end(), stored.begin(), stored.end());
+  return out;
+}
+
+// The raw chunks of a format-5 tile's bytes (each decompressed).
+std::vector<std::vector<unsigned char>> raw_chunks(const std::vector<char>& tile) {
+  auto get32 = [&](std::size_t at) {
+    std::uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= std::uint32_t(static_cast<unsigned char>(tile[at + i])) << (8 * i);
+    return v;
+  };
+  std::vector<std::vector<unsigned char>> out;
+  for (std::size_t at = 64; at < tile.size();) {
+    const std::uint32_t raw_n = get32(at), stored_n = get32(at + 4);
+    std::vector<unsigned char> raw(raw_n);
+    EXPECT_EQ(LZ4_decompress_safe(tile.data() + at + 16, reinterpret_cast<char*>(raw.data()), int(stored_n), int(raw_n)),
+              int(raw_n));
+    out.push_back(std::move(raw));
+    at += 16 + stored_n;
+  }
+  return out;
+}
+
+}  // namespace
+
+// Format 5 cuts the raw payload of format 4 into chunks of whole blocks, each at most 256 KiB and
+// compressed on its own, so that a brick of any size is written and read through buffers of one
+// chunk. A chunk that claims more than 1 MiB, a block cut by a chunk's end, or counts that
+// disagree with the header are damage, and a damaged tile leaves its table empty.
+TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
+  const auto dir = scratch_dir("tile_chunks");
+  VoxelTable t(3);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.01f, 1.f);
+  // 48^3 voxels of level 9 (12^3 full 4^3 blocks of 1040 raw bytes: 1.8 MB raw) and a few others.
+  for (std::uint32_t x = 128; x < 176; ++x)
+    for (std::uint32_t y = 0; y < 48; ++y)
+      for (std::uint32_t z = 128; z < 176; ++z) {
+        VoxelData& v = t.find_or_insert(VoxelKey::make(9, x, y, z));
+        v.distance = u(rng), v.weight = u(rng);
+        v.colour_fixed[0] = std::uint16_t(rng());
+      }
+  fill(t, sample_voxels());
+  write_tile(dir / "t.tile", {2, 0, 2}, t);
+  const std::vector<char> bytes = bytes_of(dir / "t.tile");
+  const auto chunks = raw_chunks(bytes);
+  // 1728 blocks of 1040 bytes and a few small ones: 252 full blocks fit 256 KiB, so 7 chunks.
+  ASSERT_EQ(chunks.size(), 7u);
+  std::vector<unsigned char> joined;
+  for (std::size_t i = 0; i < chunks.size(); ++i) {
+    EXPECT_LE(chunks[i].size(), std::size_t{256} << 10);
+    if (i + 1 < chunks.size()) {
+      EXPECT_GT(chunks[i].size(), (std::size_t{256} << 10) - 1040) << "a chunk ends early only when the next block does not fit";
+    }
+    joined.insert(joined.end(), chunks[i].begin(), chunks[i].end());
+  }
+  // Joined, the chunks are format 4's raw payload, byte for byte.
+  const std::vector<char> v4 = legacy_tile(4, {2, 0, 2}, t);
+  std::vector<unsigned char> v4_raw(joined.size());
+  ASSERT_EQ(LZ4_decompress_safe(v4.data() + 64, reinterpret_cast<char*>(v4_raw.data()), int(v4.size() - 64),
+                                int(v4_raw.size())),
+            int(joined.size()));
+  EXPECT_EQ(joined, v4_raw);
+  VoxelTable back(3);
+  read_tile(dir / "t.tile", back);
+  EXPECT_EQ(back.live_count(), t.live_count());
+  t.for_each([&](VoxelKey k, const VoxelData& d) {
+    const VoxelData* v = back.find(k);
+    ASSERT_NE(v, nullptr);
+    EXPECT_EQ(v->distance, d.distance);
+    EXPECT_EQ(v->colour_fixed[0], d.colour_fixed[0]);
+  });
+  // The same raw bytes cut elsewhere at block boundaries (the first two chunks as one) read the
+  // same; cut inside a block (that chunk's last 7 bytes moved to the next) they do not.
+  const std::uint32_t blocks = std::uint32_t(t.block_count());
+  const std::size_t two = chunks[0].size() + chunks[1].size();
+  // Where each block of the raw payload ends (its 16-byte key and mask, 16 bytes per present voxel).
+  std::vector<std::size_t> ends;
+  for (std::size_t at = 0; at < joined.size();) {
+    std::uint64_t mask = 0;
+    for (int i = 0; i < 8; ++i) mask |= std::uint64_t(joined[at + 8 + i]) << (8 * i);
+    at += 16 + 16 * std::size_t(std::popcount(mask));
+    ends.push_back(at);
+  }
+  ASSERT_EQ(ends.size(), blocks);
+  ASSERT_TRUE(std::binary_search(ends.begin(), ends.end(), two));
+  const std::size_t tail = ends[ends.size() - 900];  // the last 900 blocks in a third chunk
+  auto cut = [&](std::size_t at) {
+    return std::vector<std::vector<unsigned char>>{std::vector<unsigned char>(joined.begin(), joined.begin() + at),
+                                                   std::vector<unsigned char>(joined.begin() + at, joined.begin() + tail),
+                                                   std::vector<unsigned char>(joined.begin() + tail, joined.end())};
+  };
+  write_bytes(dir / "recut.tile", chunked_tile({2, 0, 2}, 3, blocks, cut(two)));
+  VoxelTable recut_back(3);
+  read_tile(dir / "recut.tile", recut_back);
+  EXPECT_EQ(recut_back.live_count(), t.live_count());
+  write_bytes(dir / "torn.tile", chunked_tile({2, 0, 2}, 3, blocks, cut(two - 7)));
+  VoxelTable torn_back(3);
+  expect_input_error([&] { read_tile(dir / "torn.tile", torn_back); }, "torn.tile", "runs past the payload");
+  EXPECT_EQ(torn_back.block_count(), 0u);
+  // Block counts against the header: one more, one fewer.
+  write_bytes(dir / "more.tile", chunked_tile({2, 0, 2}, 3, blocks + 1, chunks));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "more.tile", fresh);
+  }, "more.tile", std::to_string(blocks) + " blocks, header says " + std::to_string(blocks + 1));
+  write_bytes(dir / "fewer.tile", chunked_tile({2, 0, 2}, 3, blocks - 1, chunks));
+  VoxelTable fewer_back(3);
+  expect_input_error([&] { read_tile(dir / "fewer.tile", fewer_back); }, "fewer.tile",
+                     "more blocks than the header's " + std::to_string(blocks - 1));
+  EXPECT_EQ(fewer_back.block_count(), 0u);
+  // A flipped byte in any chunk's LZ4 block fails that chunk's checksum before it is decompressed.
+  for (std::size_t at : {std::size_t{64 + 16 + 100}, bytes.size() - 1}) {
+    std::vector<char> flipped = bytes;
+    flipped[at] ^= 0x04;
+    write_bytes(dir / "flipped.tile", flipped);
+    VoxelTable fresh(3);
+    expect_input_error([&] { read_tile(dir / "flipped.tile", fresh); }, "flipped.tile", "damaged tile: payload checksum mismatch");
+    EXPECT_EQ(fresh.block_count(), 0u) << "the chunks before the damaged one are dropped again";
+  }
+  // A chunk of more than 1 MiB is refused before anything is allocated for it.
+  write_bytes(dir / "huge.tile", chunked_tile({2, 0, 2}, 3, blocks, {joined}));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "huge.tile", fresh);
+  }, "huge.tile", "chunk 0 of " + std::to_string(joined.size()) + " raw bytes (1 to 1048576)");
 }
 
 }  // namespace sf

@@ -1,0 +1,48 @@
+#!/usr/bin/env python3
+"""Prints a 16-hex-digit hash of a job's field that does not depend on the tile format: sha256 of
+each brick's raw payload (formats 4 and 5 store the same raw bytes; format 5 cuts them into chunks),
+keyed by brick. Two binaries that write different tile formats give the same hash for the same
+field. Decompresses with the system's liblz4 (Debian package liblz4-1).
+Usage: bench/field_hash.py JOB/tiles"""
+import ctypes
+import hashlib
+import os
+import re
+import struct
+import sys
+
+lz4 = ctypes.CDLL("liblz4.so.1")
+lz4.LZ4_decompress_safe.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_int, ctypes.c_int]
+
+
+def unpack(block, raw_size):
+    out = ctypes.create_string_buffer(raw_size)
+    n = lz4.LZ4_decompress_safe(block, out, len(block), raw_size)
+    if n != raw_size:
+        sys.exit(f"LZ4 block does not decompress to {raw_size} bytes")
+    return out.raw
+
+
+def raw_payload(path):
+    data = open(path, "rb").read()
+    version, raw_size = struct.unpack_from("<I", data, 8)[0], struct.unpack_from("<Q", data, 32)[0]
+    if version == 4:
+        return unpack(data[64:], raw_size)
+    if version != 5:
+        sys.exit(f"{path}: tile format {version}, this script reads 4 and 5")
+    parts, at = [], 64
+    while at < len(data):
+        raw_n, stored_n = struct.unpack_from("<II", data, at)
+        parts.append(unpack(data[at + 16:at + 16 + stored_n], raw_n))
+        at += 16 + stored_n
+    return b"".join(parts)
+
+
+if len(sys.argv) != 2:
+    sys.exit(__doc__)
+lines = []
+for name in os.listdir(sys.argv[1]):
+    if name.endswith(".tile"):
+        brick = re.sub(r"\.[0-9]+\.tile$", "", name)
+        lines.append(f"{hashlib.sha256(raw_payload(os.path.join(sys.argv[1], name))).hexdigest()}  {brick}\n")
+print(hashlib.sha256("".join(sorted(lines)).encode()).hexdigest()[:16])
