@@ -86,9 +86,9 @@ constexpr bool stores_presence(std::uint32_t version) { return version >= 4; }
 // From format 5 the raw payload is cut into chunks of whole blocks, each compressed on its own and
 // stored behind its u32 raw and u32 stored sizes. A tile is then written and read through buffers
 // of one chunk: as one LZ4 block, its raw and compressed images were two fresh mappings of the
-// whole brick's size (hundreds of MB for a large brick, most of a checkpoint's memory and a tenth
-// of its time in the kernel's page zeroing; bench/README.md, session 33), and the packed bytes
-// went to memory and back before LZ4 read them. 256 KiB stay in the core's L2 cache; LZ4's window
+// whole brick's size (hundreds of MB for a large brick, outside the memory budget, their page
+// zeroing 3.6 % of igea's integration; bench/README.md, session 33), and the packed bytes went to
+// memory and back before LZ4 read them. 256 KiB stay in the core's L2 cache; LZ4's window
 // is 64 KiB, so independent chunks compress about as well as one block.
 constexpr bool stores_chunks(std::uint32_t version) { return version >= 5; }
 constexpr std::size_t kChunkRaw = std::size_t{256} << 10;      // the writer's chunks: at most this raw
