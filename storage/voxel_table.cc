@@ -12,63 +12,59 @@ std::size_t VoxelTable::live_count() const {
 }
 
 void VoxelTable::recount() {
-  bytes_ = blocks_.capacity() * sizeof(Block) + index_keys_.capacity() * 12;
+  bytes_ = blocks_.capacity() * sizeof(Block) + index_.capacity() * sizeof(Slot);
   for (const Block& b : blocks_) bytes_ += (std::size_t{1} << (3 * b.log)) * sizeof(VoxelData);
 }
 
-std::int64_t VoxelTable::find_slot(std::uint64_t origin) const {
-  if (index_keys_.empty()) return -1;
-  const std::size_t mask = index_keys_.size() - 1;
+VoxelData* VoxelTable::find_block(std::uint64_t origin) const {
+  if (index_.empty()) return nullptr;
+  const std::size_t mask = index_.size() - 1;
   for (std::size_t i = std::hash<VoxelKey>{}(VoxelKey{origin}) & mask;; i = (i + 1) & mask) {
-    if (index_keys_[i] == origin) return index_pos_[i];
-    if (index_keys_[i] == kEmpty) return -1;
+    if (index_[i].key == origin) return index_[i].voxels;
+    if (index_[i].key == kEmpty) return nullptr;
   }
 }
 
+void VoxelTable::insert_slot(std::uint64_t origin, VoxelData* voxels) {
+  const std::size_t mask = index_.size() - 1;
+  std::size_t i = std::hash<VoxelKey>{}(VoxelKey{origin}) & mask;
+  while (index_[i].key != kEmpty) i = (i + 1) & mask;
+  index_[i] = {origin, voxels};
+}
+
 void VoxelTable::reindex(std::size_t capacity) {
-  index_keys_.assign(capacity, kEmpty);
-  index_pos_.assign(capacity, 0);
-  const std::size_t mask = capacity - 1;
-  for (std::size_t p = 0; p < blocks_.size(); ++p) {
-    std::size_t i = std::hash<VoxelKey>{}(blocks_[p].origin) & mask;
-    while (index_keys_[i] != kEmpty) i = (i + 1) & mask;
-    index_keys_[i] = blocks_[p].origin.bits;
-    index_pos_[i] = std::uint32_t(p);
-  }
+  index_.assign(capacity, Slot{kEmpty, nullptr});
+  for (const Block& b : blocks_) insert_slot(b.origin.bits, b.voxels.get());
 }
 
 BlockRef VoxelTable::block(VoxelKey key, bool create) {
   const VoxelKey origin = block_origin(key);
   const int log = block_log(key.level(), brick_level_);
-  const std::int64_t p = find_slot(origin.bits);
-  if (p >= 0) return {origin, log, blocks_[std::size_t(p)].voxels.get()};
+  if (VoxelData* found = find_block(origin.bits)) return {origin, log, found};
   if (!create) return {origin, log, nullptr};
   Block b;
   b.origin = origin;
   b.log = log;
   b.voxels = std::make_unique<VoxelData[]>(std::size_t{1} << (3 * log));
+  VoxelData* const voxels = b.voxels.get();
   const std::size_t old_capacity = blocks_.capacity();
   blocks_.push_back(std::move(b));
   bytes_ += (std::size_t{1} << (3 * log)) * sizeof(VoxelData) + (blocks_.capacity() - old_capacity) * sizeof(Block);
-  if ((blocks_.size() + 1) * 10 > index_keys_.size() * 7) {
-    bytes_ -= index_keys_.capacity() * 12;
-    reindex(index_keys_.empty() ? 16 : index_keys_.size() * 2);
-    bytes_ += index_keys_.capacity() * 12;
+  if ((blocks_.size() + 1) * 10 > index_.size() * 7) {
+    bytes_ -= index_.capacity() * sizeof(Slot);
+    reindex(index_.empty() ? 16 : index_.size() * 2);
+    bytes_ += index_.capacity() * sizeof(Slot);
   } else {
-    const std::size_t mask = index_keys_.size() - 1;
-    std::size_t i = std::hash<VoxelKey>{}(origin) & mask;
-    while (index_keys_[i] != kEmpty) i = (i + 1) & mask;
-    index_keys_[i] = origin.bits;
-    index_pos_[i] = std::uint32_t(blocks_.size() - 1);
+    insert_slot(origin.bits, voxels);
   }
-  return {origin, log, blocks_.back().voxels.get()};
+  return {origin, log, voxels};
 }
 
 const VoxelData* VoxelTable::find(VoxelKey key) const {
-  const std::int64_t p = find_slot(block_origin(key).bits);
-  if (p < 0) return nullptr;
-  const Block& b = blocks_[std::size_t(p)];
-  const VoxelData& v = BlockRef{b.origin, b.log, b.voxels.get()}.at(key);
+  const VoxelKey origin = block_origin(key);
+  VoxelData* const voxels = find_block(origin.bits);
+  if (!voxels) return nullptr;
+  const VoxelData& v = BlockRef{origin, block_log(key.level(), brick_level_), voxels}.at(key);
   return v.weight != 0 ? &v : nullptr;
 }
 
@@ -98,8 +94,7 @@ void VoxelTable::compact() {
 
 void VoxelTable::clear() {
   std::vector<Block>().swap(blocks_);
-  std::vector<std::uint64_t>().swap(index_keys_);
-  std::vector<std::uint32_t>().swap(index_pos_);
+  std::vector<Slot>().swap(index_);
   bytes_ = 0;
 }
 

@@ -4,7 +4,7 @@
 // Integration touches voxels in bands a few cells thick, so neighbouring voxels are written
 // together: a dense block turns most of those writes into stores next to the previous one, where
 // a hash table of single voxels costs a random probe each (the reason session 1's integration was
-// memory-bound). A block index (open addressing) maps a block's origin key to its slot.
+// memory-bound). A block index (open addressing) maps a block's origin key to its voxels.
 //
 // Block shape: a block of level l holds 2^k voxels per axis with k = clamp(l - brick_level, 0, 2),
 // aligned to multiples of 2^k. A brick holds 2^(l - brick_level) voxels of level l per axis, so a
@@ -209,13 +209,19 @@ class VoxelTable {
           if (b.voxels[i].live())
             f(VoxelKey::make(b.origin.level(), b.origin.x() + x, b.origin.y() + y, b.origin.z() + z), b.voxels[i]);
   }
-  std::int64_t find_slot(std::uint64_t origin) const;  // index into blocks_, or -1
+  // An index slot: a block's origin key and its voxels, side by side, so that a lookup reads one
+  // cache line (with keys, positions and the blocks in three arrays it read three).
+  struct Slot {
+    std::uint64_t key;
+    VoxelData* voxels;
+  };
+  VoxelData* find_block(std::uint64_t origin) const;  // the block's voxels, or null
   void reindex(std::size_t capacity);
+  void insert_slot(std::uint64_t origin, VoxelData* voxels);
 
   int brick_level_;
   std::vector<Block> blocks_;
-  std::vector<std::uint64_t> index_keys_;  // open addressing: origin key -> position in blocks_
-  std::vector<std::uint32_t> index_pos_;
+  std::vector<Slot> index_;  // open addressing: origin key -> the block's voxels
   std::size_t bytes_ = 0;
   void recount();
 };
