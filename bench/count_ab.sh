@@ -6,8 +6,8 @@
 # cache misses and the real predictor are left out. Needs valgrind (apt-get install valgrind);
 # a run takes ~30x the integration's time.
 # Prints per binary the counts, which cover the whole process (bounds, plan and integrate alike),
-# B/A per count, and whether the tiles are byte-identical (per brick; generation numbers left
-# out).
+# B/A per count, and whether the two fields are identical (bench/field_hash.py: each brick's
+# decompressed payload, whatever the tile format; generation numbers left out).
 # Usage: bench/count_ab.sh INPUT CONFIG BIN_A BIN_B [fuse args...]
 #   e.g. bench/count_ab.sh /work/q/igea configs/mvs.toml old/scalefuse build/bin/scalefuse
 set -euo pipefail
@@ -30,8 +30,8 @@ one "$B" 1 b &
 pb=$!
 wait $pa
 wait $pb
-ta=$("$(dirname "$0")/tiles_hash.sh" "$WORK/a/tiles")
-tb=$("$(dirname "$0")/tiles_hash.sh" "$WORK/b/tiles")
+ta=$("$(dirname "$0")/field_hash.py" "$WORK/a/tiles")
+tb=$("$(dirname "$0")/field_hash.py" "$WORK/b/tiles")
 python3 - "$WORK" "$A" "$B" "$ta" "$tb" <<'PY'
 import re, sys
 work, a, b, ta, tb = sys.argv[1:6]

@@ -2,8 +2,9 @@
 # Integration of two binaries compared on one input, runs alternating (A B A B ...), so that the
 # ratios hold on a noisy machine. Each run is a fresh `fuse --integrate-only` job; per binary it
 # prints the medians of wall time, the bounds / plan / integrate stages (from --stats), minor page
-# faults and peak RSS, and whether the two binaries' tiles are byte-identical (sha256 of each
-# brick's tile; the generation numbers in tile names follow the plan's order and are left out).
+# faults and peak RSS, and whether the two binaries' fields are identical (bench/field_hash.py:
+# sha256 of each brick's decompressed payload, so tile formats 4 and 5 compare; the generation
+# numbers in tile names follow the plan's order and are left out).
 # With CORE=N in the environment every run is pinned to core N (taskset), and the fastest run of
 # each binary is printed too: one core's runs close together drift less than the two cores
 # of bench/pair_ab.sh differ on some machines (bench/README.md, session 32).
@@ -25,7 +26,7 @@ for i in $(seq "$RUNS"); do
     rm -rf "$WORK/job"
     "${PIN[@]}" /usr/bin/time -f "%e %R %M" -o "$WORK/time" "$bin" fuse "$INPUT" --config "$CONFIG" -o "$WORK/m.ply" \
       --job "$WORK/job" --integrate-only --stats "$WORK/stats.json" -q "$@" > /dev/null
-    tiles=$("$(dirname "$0")/tiles_hash.sh" "$WORK/job/tiles")
+    tiles=$("$(dirname "$0")/field_hash.py" "$WORK/job/tiles")
     python3 - "$WORK" "$side" "$tiles" >> "$WORK/runs" <<'PY'
 import json, sys
 work, side, tiles = sys.argv[1:4]
@@ -50,5 +51,5 @@ for side in "AB":
 print("B / A: wall {:.3f}, plan {:.3f}, integrate {:.3f}".format(
     *(med["B"][k] / med["A"][k] if med["A"][k] else float("nan") for k in (0, 2, 3))))
 hashes = {x[7] for x in rows}
-print("tiles byte-identical across all runs" if len(hashes) == 1 else f"tiles DIFFER: {sorted(hashes)}")
+print("fields identical across all runs" if len(hashes) == 1 else f"fields DIFFER: {sorted(hashes)}")
 PY

@@ -6,8 +6,8 @@
 # core was at times 25-30 % slower than the other for minutes on end; two copies of one binary
 # gave swapped-pair means within 1.5 % of 1. Use 6 pairs or more and read the median.
 # Prints per pair the integrate seconds (from --stats) and ratio B/A, then the median over pairs
-# of the swapped-pair geometric means, and whether the binaries' tiles are byte-identical (per
-# brick; the generation numbers in tile names are left out).
+# of the swapped-pair geometric means, and whether the binaries' fields are identical
+# (bench/field_hash.py; the generation numbers in tile names are left out).
 # Usage: bench/pair_ab.sh INPUT CONFIG PAIRS BIN_A BIN_B [fuse args...]   (PAIRS even)
 #   e.g. bench/pair_ab.sh /work/q/igea configs/mvs.toml 6 old/scalefuse build/bin/scalefuse
 set -euo pipefail
@@ -31,8 +31,8 @@ for i in $(seq "$PAIRS"); do
   pb=$!
   wait $pa
   wait $pb
-  ta=$("$(dirname "$0")/tiles_hash.sh" "$WORK/a/tiles")
-  tb=$("$(dirname "$0")/tiles_hash.sh" "$WORK/b/tiles")
+  ta=$("$(dirname "$0")/field_hash.py" "$WORK/a/tiles")
+  tb=$("$(dirname "$0")/field_hash.py" "$WORK/b/tiles")
   python3 - "$WORK" "$ca" "$ta" "$tb" >> "$WORK/pairs" <<'PY'
 import json, sys
 work, core_a, ta, tb = sys.argv[1:5]

@@ -13,7 +13,6 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
-#include <functional>
 #include <limits>
 #include <memory>
 #include <set>
@@ -370,46 +369,46 @@ namespace {
 // Decodes a raw payload's blocks into a table, checking everything a damaged file could get wrong.
 class BlockDecoder {
  public:
-  BlockDecoder(std::uint32_t version, int brick_level, BrickCoord coord, std::uint32_t block_count, VoxelTable& out,
-               const std::function<InputError(const std::string&)>& bad)
-      : version_(version), brick_level_(brick_level), coord_(coord), block_count_(block_count), out_(out), bad_(bad) {}
+  BlockDecoder(const std::string& name, std::uint32_t version, int brick_level, BrickCoord coord,
+               std::uint32_t block_count, VoxelTable& out)
+      : name_(name), version_(version), brick_level_(brick_level), coord_(coord), block_count_(block_count), out_(out) {}
 
   // Decodes one block from p (end: the end of the raw bytes at hand); returns the byte after it.
   const unsigned char* block(const unsigned char* p, const unsigned char* end) {
     const std::uint32_t b = decoded_;
-    if (b == block_count_) throw bad_("more blocks than the header's " + std::to_string(block_count_));
-    if (end - p < 8) throw bad_("block " + std::to_string(b) + " runs past the payload");
+    if (b == block_count_) throw bad("more blocks than the header's " + std::to_string(block_count_));
+    if (end - p < 8) throw bad("block " + std::to_string(b) + " runs past the payload");
     const VoxelKey origin{get64(p)};
     p += 8;
     const int level = origin.level();
     if ((origin.bits >> 62) != 0 || level > kMaxLevel || !valid_voxel(level, origin.x(), origin.y(), origin.z()))
-      throw bad_("block " + std::to_string(b) + " has an invalid key");
-    if (b > 0 && origin.bits <= previous_) throw bad_("blocks out of order or duplicated");
+      throw bad("block " + std::to_string(b) + " has an invalid key");
+    if (b > 0 && origin.bits <= previous_) throw bad("blocks out of order or duplicated");
     previous_ = origin.bits;
-    if (out_.block_origin(origin) != origin) throw bad_("block " + std::to_string(b) + " is not aligned");
+    if (out_.block_origin(origin) != origin) throw bad("block " + std::to_string(b) + " is not aligned");
     const BrickCoord bc = brick_of(origin, brick_level_);
     if (bc.x != coord_.x || bc.y != coord_.y || bc.z != coord_.z)
-      throw bad_("block " + std::to_string(b) + " lies outside the brick");
+      throw bad("block " + std::to_string(b) + " lies outside the brick");
     const std::size_t n = std::size_t{1} << (3 * block_log(level, brick_level_));
     const std::uint64_t all = n == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << n) - 1;
     std::uint64_t present = all;
     if (stores_presence(version_)) {
-      if (end - p < 8) throw bad_("block " + std::to_string(b) + " runs past the payload");
+      if (end - p < 8) throw bad("block " + std::to_string(b) + " runs past the payload");
       present = get64(p);
       p += 8;
-      if ((present & ~all) != 0) throw bad_("block " + std::to_string(b) + " marks voxels beyond its size");
+      if ((present & ~all) != 0) throw bad("block " + std::to_string(b) + " marks voxels beyond its size");
     }
     const std::size_t record = record_bytes(version_);
     if (std::size_t(end - p) < std::size_t(std::popcount(present)) * record)
-      throw bad_("block " + std::to_string(b) + " runs past the payload");
+      throw bad("block " + std::to_string(b) + " runs past the payload");
     BlockRef ref = out_.block(origin, true);
     for (std::uint64_t m = present; m != 0; m &= m - 1, p += record) {
       VoxelData& v = ref.data[std::countr_zero(m)];
       v.distance = get_float(p);
       v.weight = get_float(p + 4);
       if (!std::isfinite(v.distance) || !std::isfinite(v.weight))
-        throw bad_("block " + std::to_string(b) + " holds a non-finite value");
-      if (stores_presence(version_) && v.weight == 0) throw bad_("block " + std::to_string(b) + " stores an absent voxel");
+        throw bad("block " + std::to_string(b) + " holds a non-finite value");
+      if (stores_presence(version_) && v.weight == 0) throw bad("block " + std::to_string(b) + " stores an absent voxel");
       if (version_ >= 3) {
         for (int c = 0; c < 3; ++c) v.colour_fixed[c] = get16(p + 8 + 2 * c);
         v.colour_share = get16(p + 14);
@@ -419,7 +418,7 @@ class BlockDecoder {
         const float colour_weight = get_float(p + 20);
         if (!std::isfinite(colour[0]) || !std::isfinite(colour[1]) || !std::isfinite(colour[2]) ||
             !std::isfinite(colour_weight))
-          throw bad_("block " + std::to_string(b) + " holds a non-finite value");
+          throw bad("block " + std::to_string(b) + " holds a non-finite value");
         v.set_colour(colour, colour_weight);
       }
     }
@@ -429,12 +428,14 @@ class BlockDecoder {
   std::uint32_t decoded() const { return decoded_; }
 
  private:
+  InputError bad(const std::string& what) const { return input_error(name_, "damaged tile: " + what); }
+
+  const std::string& name_;  // the tile's path, for errors
   const std::uint32_t version_;
   const int brick_level_;
   const BrickCoord coord_;
   const std::uint32_t block_count_;
   VoxelTable& out_;
-  const std::function<InputError(const std::string&)>& bad_;
   std::uint32_t decoded_ = 0;
   std::uint64_t previous_ = 0;  // the last block's origin key
 };
@@ -445,9 +446,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
   TileBuffers unpooled(0);
   TileBuffers& pool = buffers ? *buffers : unpooled;
   const std::string name = path.string();
-  const std::function<InputError(const std::string&)> bad = [&](const std::string& what) {
-    return input_error(name, "damaged tile: " + what);
-  };
+  auto bad = [&](const std::string& what) { return input_error(name, "damaged tile: " + what); };
   std::ifstream in(path, std::ios::binary);
   if (!in) throw input_error(name, "cannot open tile");
   in.seekg(0, std::ios::end);
@@ -478,7 +477,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
   if ((!stores_chunks(version) && raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE)) || raw_size > 255 * stored_size + 16)
     throw bad("implausible raw size " + std::to_string(raw_size));
   if (out.block_count() != 0) throw std::logic_error(name + ": read_tile into a non-empty table");
-  BlockDecoder decoder(version, brick_level, coord, block_count, out, bad);
+  BlockDecoder decoder(name, version, brick_level, coord, block_count, out);
   try {
     if (stores_chunks(version)) {
       // Chunk by chunk: each is hashed, decompressed and decoded before the next is read.

@@ -184,30 +184,39 @@ std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const Vox
 }
 
 // A tile of format `version` around the raw payload `raw` (LZ4, sizes, checksums all valid).
+void put_le(std::vector<unsigned char>& out, std::uint64_t v, int n) {
+  for (int i = 0; i < n; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
+}
+
+// A tile of format `version`: the 64-byte header (its own checksum computed here) and the stored payload.
+std::vector<char> tile_bytes(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
+                             std::uint64_t raw_bytes, const std::vector<unsigned char>& stored,
+                             std::uint64_t payload_checksum) {
+  std::vector<unsigned char> h;
+  for (char c : std::string("SFTILE1\n")) h.push_back(static_cast<unsigned char>(c));
+  put_le(h, version, 4);
+  put_le(h, std::uint32_t(brick_level), 4);
+  put_le(h, coord.x, 4);
+  put_le(h, coord.y, 4);
+  put_le(h, coord.z, 4);
+  put_le(h, block_count, 4);
+  put_le(h, raw_bytes, 8);
+  put_le(h, stored.size(), 8);
+  put_le(h, payload_checksum, 8);
+  put_le(h, tile_checksum(version, h.data(), 56), 8);
+  std::vector<char> out(h.begin(), h.end());
+  out.insert(out.end(), stored.begin(), stored.end());
+  return out;
+}
+
 std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
                             const std::vector<unsigned char>& raw) {
-  auto put = [](std::vector<unsigned char>& out, std::uint64_t v, int n) {
-    for (int i = 0; i < n; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
-  };
   std::vector<unsigned char> stored(std::size_t(LZ4_compressBound(int(raw.size()))));
   stored.resize(std::size_t(LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
                                                  reinterpret_cast<char*>(stored.data()), int(raw.size()),
                                                  int(stored.size()))));
-  std::vector<unsigned char> h;
-  for (char c : std::string("SFTILE1\n")) h.push_back(static_cast<unsigned char>(c));
-  put(h, version, 4);
-  put(h, std::uint32_t(brick_level), 4);
-  put(h, coord.x, 4);
-  put(h, coord.y, 4);
-  put(h, coord.z, 4);
-  put(h, block_count, 4);
-  put(h, raw.size(), 8);
-  put(h, stored.size(), 8);
-  put(h, tile_checksum(version, stored.data(), stored.size()), 8);
-  put(h, tile_checksum(version, h.data(), 56), 8);
-  std::vector<char> out(h.begin(), h.end());
-  out.insert(out.end(), stored.begin(), stored.end());
-  return out;
+  return tile_bytes(version, coord, brick_level, block_count, raw.size(), stored,
+                    tile_checksum(version, stored.data(), stored.size()));
 }
 
 void write_bytes(const std::filesystem::path& p, const std::vector<char>& b) {
@@ -491,9 +500,6 @@ namespace {
 // stored bytes; the header's payload checksum is that of the chunk headers.
 std::vector<char> chunked_tile(BrickCoord coord, int brick_level, std::uint32_t block_count,
                                const std::vector<std::vector<unsigned char>>& chunks) {
-  auto put = [](std::vector<unsigned char>& out, std::uint64_t v, int n) {
-    for (int i = 0; i < n; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
-  };
   std::vector<unsigned char> stored, chunk_headers;
   std::uint64_t raw_bytes = 0;
   for (const auto& raw : chunks) {
@@ -501,29 +507,16 @@ std::vector<char> chunked_tile(BrickCoord coord, int brick_level, std::uint32_t 
     packed.resize(std::size_t(LZ4_compress_default(reinterpret_cast<const char*>(raw.data()), packed.data(),
                                                    int(raw.size()), int(packed.size()))));
     std::vector<unsigned char> header;
-    put(header, raw.size(), 4);
-    put(header, packed.size(), 4);
-    put(header, tile_checksum(5, packed.data(), packed.size()), 8);
+    put_le(header, raw.size(), 4);
+    put_le(header, packed.size(), 4);
+    put_le(header, tile_checksum(5, packed.data(), packed.size()), 8);
     chunk_headers.insert(chunk_headers.end(), header.begin(), header.end());
     stored.insert(stored.end(), header.begin(), header.end());
     stored.insert(stored.end(), packed.begin(), packed.end());
     raw_bytes += raw.size();
   }
-  std::vector<unsigned char> h;
-  for (char c : std::string("SFTILE1\n")) h.push_back(static_cast<unsigned char>(c));
-  put(h, 5, 4);
-  put(h, std::uint32_t(brick_level), 4);
-  put(h, coord.x, 4);
-  put(h, coord.y, 4);
-  put(h, coord.z, 4);
-  put(h, block_count, 4);
-  put(h, raw_bytes, 8);
-  put(h, stored.size(), 8);
-  put(h, tile_checksum(5, chunk_headers.data(), chunk_headers.size()), 8);
-  put(h, tile_checksum(5, h.data(), 56), 8);
-  std::vector<char> out(h.begin(), h.end());
-  out.insert(out.end(), stored.begin(), stored.end());
-  return out;
+  return tile_bytes(5, coord, brick_level, block_count, raw_bytes, stored,
+                    tile_checksum(5, chunk_headers.data(), chunk_headers.size()));
 }
 
 // The raw chunks of a format-5 tile's bytes (each decompressed).
