@@ -369,9 +369,9 @@ void run_fuse(const FuseArgs& a) {
     ProgressPrinter printer(a.quiet);
     FusionHooks hooks;
     hooks.progress = [&](std::string_view stage, double done, double total) { printer(stage, done, total); };
-    if (!a.export_vdb.empty())
-      hooks.on_regularized = [&](const std::vector<SurfaceVoxel>& voxels, const RootCube& root) {
-        export_vdb(a.export_vdb, voxels, root);
+    if (!a.export_vdb.empty())  // the plugin is loaded now, so that a missing one fails before the work
+      hooks.on_regularized = [&a, vdb = VdbExporter::load()](const std::vector<SurfaceVoxel>& voxels, const RootCube& root) {
+        vdb.write(a.export_vdb, voxels, root);
       };
     // SIGINT/SIGTERM stop the run at the next safe point (after the depth maps or bricks in
     // flight), with the job checkpointed, and the process exits with 128 + the signal.

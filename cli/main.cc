@@ -8,7 +8,6 @@
 
 #include "cli/commands.h"
 #include "engine/error.h"
-#include "engine/vdb_export.h"
 #include "scheduler/huge_pages.h"
 
 int main(int argc, char** argv) {
@@ -25,7 +24,6 @@ int main(int argc, char** argv) {
   // instead of killing the process mid-write.
   std::signal(SIGXFSZ, SIG_IGN);
   try {
-    sf::initialize_vdb();
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);

@@ -3,18 +3,44 @@
 // grid "distance_Lnn" (signed distance, metres, positive in front of the surface) and a float grid
 // "weight_Lnn" (confidence), with a linear transform so that index (i,j,k) of level l sits at
 // root.min + cell_size(l) * (i,j,k) in world metres.
+//
+// The OpenVDB code is a plugin, libscalefuse_vdb.so (engine/vdb_plugin.cc), loaded only by a run
+// that exports. Linked into the program, OpenVDB's 69,000 symbol relocations, all resolved at load
+// (the library is linked with BIND_NOW), cost every start of the program ~70 ms on this project's
+// machines, twice with the huge-page re-execution (scheduler/huge_pages.h): more than the work of
+// many commands, and of most tests (bench/README.md, session 34).
 #include <filesystem>
+#include <memory>
+#include <string>
 #include <vector>
 
-#include "engine/geometry.h"
 #include "engine/extract/extract.h"
+#include "engine/geometry.h"
 
 namespace sf {
 
-// Call once per process before any OpenVDB use (cli/ does).
-void initialize_vdb();
+// The plugin's one entry point (extern "C", so that dlsym finds it by this name). Writes `path`
+// (through a temporary file beside it, then a rename); returns 0, or non-zero with a one-line
+// message in `error` (no exception crosses the plugin's boundary).
+using VdbExportFn = int (*)(const char* path, const SurfaceVoxel* voxels, std::size_t count, const RootCube* root,
+                            char* error, std::size_t error_size);
+inline constexpr const char* kVdbExportSymbol = "scalefuse_export_vdb_v1";
 
-// Writes to a temporary file beside `path`, then renames it into place.
-void export_vdb(const std::filesystem::path& path, const std::vector<SurfaceVoxel>& voxels, const RootCube& root);
+class VdbExporter {
+ public:
+  // Loads the plugin: the file named by $SCALEFUSE_VDB_PLUGIN if set, else
+  // lib/scalefuse/libscalefuse_vdb.so beside the folder of the running program (build/bin/ ->
+  // build/lib/scalefuse/). Throws std::runtime_error naming the file if it cannot be loaded.
+  static VdbExporter load();
+  // The plugin file load() tries.
+  static std::filesystem::path plugin_path();
+
+  // Writes the grids; throws std::runtime_error with the plugin's message if that fails.
+  void write(const std::filesystem::path& path, const std::vector<SurfaceVoxel>& voxels, const RootCube& root) const;
+
+ private:
+  std::shared_ptr<void> handle_;  // dlclose()d with the last copy
+  VdbExportFn export_ = nullptr;
+};
 
 }  // namespace sf

@@ -207,6 +207,18 @@ TEST(CliValidScene, WritesMeshStatsAndVdb) {
   const std::string sc((std::istreambuf_iterator<char>(c)), {});
   EXPECT_TRUE(sa == sc) << "meshes differ between the global and the per-brick tetrahedralization";
   EXPECT_EQ(nlohmann::json::parse(std::ifstream(stats_small))["extract"]["mode"], "bricks");
+  // The OpenVDB plugin missing: one line naming it, exit 1, and neither the grids nor the mesh.
+  const fs::path vdb_missing = root / "missing.vdb", out_missing = root / "missing.ply";
+  CliRun missing;
+  missing.code = test::run_command("SCALEFUSE_VDB_PLUGIN=" + (root / "no-such-plugin.so").string() + " " +
+                                       test::scalefuse_binary().string() + " fuse " + (root / "scene").string() +
+                                       " -o " + out_missing.string() + " -q --export-vdb " + vdb_missing.string(),
+                                   &missing.output);
+  EXPECT_EQ(missing.code, 1) << missing.output;
+  EXPECT_NE(missing.output.find("no-such-plugin.so"), std::string::npos) << missing.output;
+  EXPECT_EQ(std::count(missing.output.begin(), missing.output.end(), '\n'), 1) << missing.output;
+  EXPECT_FALSE(fs::exists(vdb_missing));
+  EXPECT_FALSE(fs::exists(out_missing));
 }
 
 }  // namespace
