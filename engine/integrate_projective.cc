@@ -504,6 +504,7 @@ ItemFrustum item_frustum(const Prepared& p, const RootCube& root, int tile, int 
 // v0 + ib vb + ic vc + t ma, t the position along the column's axis.
 struct ColumnPlane {
   double v0, vb, vc, ma, inv_ma;
+  double inv_ma_h;  // inv_ma / h: the bound on t in cells, without a division per column
 };
 
 // Which columns of a lattice row can meet the slab. A column is not empty iff every lower bound
@@ -696,7 +697,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         ColumnPlane cp[8];
         for (int k = 0; k < 8; ++k) {
           const HalfSpace& hs = fr.planes[k];
-          cp[k] = {hs.m.dot(root.min) - hs.k, hs.m[bx] * h, hs.m[cx] * h, hs.m[ax], hs.m[ax] != 0 ? 1.0 / hs.m[ax] : 0.0};
+          const double inv_ma = hs.m[ax] != 0 ? 1.0 / hs.m[ax] : 0.0;
+          cp[k] = {hs.m.dot(root.min) - hs.k, hs.m[bx] * h, hs.m[cx] * h, hs.m[ax], inv_ma, inv_ma / h};
         }
         const RowPrefilter prefilter(cp, double(a0 - 1) * h, double(a1 + 1) * h, 1e-6 * h);
         // The planes by their part in a column's clip: parallel to it, bounding t below, above.
@@ -732,24 +734,24 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             base[ax] = root.min[ax];
             base[bx] = root.min[bx] + h * double(ib);
             base[cx] = root.min[cx] + h * double(ic);
-            double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // a0..a1 in index space
+            double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // cells along the column
             bool empty = false;
             for (int j = 0; j < n_parallel && !empty; ++j)
               empty = row_value[parallel[j]] + double(ic) * cp[parallel[j]].vc < 0;
             if (empty) continue;
             for (int j = 0; j < n_lower; ++j) {
               const ColumnPlane& c = cp[lower[j]];
-              tmin = std::max(tmin, -(row_value[lower[j]] + double(ic) * c.vc) * c.inv_ma);
+              tmin = std::max(tmin, -(row_value[lower[j]] + double(ic) * c.vc) * c.inv_ma_h);
             }
             for (int j = 0; j < n_upper; ++j) {
               const ColumnPlane& c = cp[upper[j]];
-              tmax = std::min(tmax, -(row_value[upper[j]] + double(ic) * c.vc) * c.inv_ma);
+              tmax = std::min(tmax, -(row_value[upper[j]] + double(ic) * c.vc) * c.inv_ma_h);
             }
             if (tmin > tmax) continue;
-            tmin = std::max(tmin, double(a0 - 1) * h);  // finite before the integer casts
-            tmax = std::min(tmax, double(a1 + 1) * h);
-            const std::int64_t i0 = std::max<std::int64_t>(a0, -fast_floor(-(tmin / h)));  // ceil
-            const std::int64_t i1 = std::min<std::int64_t>(a1, fast_floor(tmax / h));
+            tmin = std::max(tmin, double(a0 - 1));  // finite before the integer casts
+            tmax = std::min(tmax, double(a1 + 1));
+            const std::int64_t i0 = std::max<std::int64_t>(a0, -fast_floor(-tmin));  // ceil
+            const std::int64_t i1 = std::min<std::int64_t>(a1, fast_floor(tmax));
             double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
             camera_terms(R, base, bx, terms);
             camera_terms(R, base, cx, terms);
