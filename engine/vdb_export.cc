@@ -1,7 +1,6 @@
 #include "engine/vdb_export.h"
 
 #include <dlfcn.h>
-#include <unistd.h>
 
 #include <cstdlib>
 #include <stdexcept>
@@ -27,7 +26,6 @@ VdbExporter VdbExporter::load() {
                              (why ? why : file.c_str()));
   }
   VdbExporter exporter;
-  exporter.handle_ = std::shared_ptr<void>(handle, [](void* h) { ::dlclose(h); });
   exporter.export_ = reinterpret_cast<VdbExportFn>(::dlsym(handle, kVdbExportSymbol));
   if (!exporter.export_)
     throw std::runtime_error(file.string() + ": not the OpenVDB export plugin (no " + kVdbExportSymbol + ")");

@@ -10,7 +10,6 @@
 // machines, twice with the huge-page re-execution (scheduler/huge_pages.h): more than the work of
 // many commands, and of most tests (bench/README.md, session 34).
 #include <filesystem>
-#include <memory>
 #include <string>
 #include <vector>
 
@@ -39,7 +38,8 @@ class VdbExporter {
   void write(const std::filesystem::path& path, const std::vector<SurfaceVoxel>& voxels, const RootCube& root) const;
 
  private:
-  std::shared_ptr<void> handle_;  // dlclose()d with the last copy
+  // The plugin stays loaded until the process exits (never dlclose()d: OpenVDB's statics and
+  // its TBB use are not made to be unloaded mid-run), so copies share nothing to manage.
   VdbExportFn export_ = nullptr;
 };
 
