@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <system_error>
 
+#include "engine/input/file_util.h"
+
 namespace sf {
 
 std::filesystem::path VdbExporter::plugin_path() {
@@ -34,8 +36,14 @@ VdbExporter VdbExporter::load() {
 
 void VdbExporter::write(const std::filesystem::path& path, const std::vector<SurfaceVoxel>& voxels,
                         const RootCube& root) const {
+  const std::filesystem::path tmp = input_detail::temp_sibling(path);
   char error[1024] = {};
-  if (export_(path.c_str(), voxels.data(), voxels.size(), &root, error, sizeof error) != 0) throw std::runtime_error(error);
+  if (export_(tmp.c_str(), voxels.data(), voxels.size(), &root, error, sizeof error) != 0) {
+    std::error_code ignored;
+    std::filesystem::remove(tmp, ignored);
+    throw std::runtime_error(path.string() + ": cannot write VDB: " + error);
+  }
+  input_detail::commit_temp(tmp, path);
 }
 
 }  // namespace sf

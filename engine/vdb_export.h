@@ -18,9 +18,9 @@
 
 namespace sf {
 
-// The plugin's one entry point (extern "C", so that dlsym finds it by this name). Writes `path`
-// (through a temporary file beside it, then a rename); returns 0, or non-zero with a one-line
-// message in `error` (no exception crosses the plugin's boundary).
+// The plugin's one entry point (extern "C", so that dlsym finds it by this name). Writes the
+// grids to `path` as it is (VdbExporter::write gives it a temporary sibling and renames); returns
+// 0, or non-zero with OpenVDB's one-line message in `error` (no exception crosses the boundary).
 using VdbExportFn = int (*)(const char* path, const SurfaceVoxel* voxels, std::size_t count, const RootCube* root,
                             char* error, std::size_t error_size);
 inline constexpr const char* kVdbExportSymbol = "scalefuse_export_vdb_v1";
@@ -34,7 +34,8 @@ class VdbExporter {
   // The plugin file load() tries.
   static std::filesystem::path plugin_path();
 
-  // Writes the grids; throws std::runtime_error with the plugin's message if that fails.
+  // Writes the grids through a temporary sibling of `path`, renamed into place; throws
+  // std::runtime_error "path: cannot write VDB: why" if that fails (no file is left behind).
   void write(const std::filesystem::path& path, const std::vector<SurfaceVoxel>& voxels, const RootCube& root) const;
 
  private:

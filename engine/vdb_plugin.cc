@@ -1,11 +1,9 @@
 // The OpenVDB export plugin, libscalefuse_vdb.so (engine/vdb_export.h): the only code that links
 // OpenVDB. Built as a module of its own, never into sf_fusion.
 #include <openvdb/openvdb.h>
-#include <unistd.h>
 
 #include <array>
 #include <cstdio>
-#include <cstring>
 #include <exception>
 #include <filesystem>
 #include <memory>
@@ -57,17 +55,9 @@ void write_grids(const std::filesystem::path& path, const SurfaceVoxel* voxels, 
       grids.push_back(weight[l]);
     }
   accessors.clear();
-  const std::filesystem::path tmp = path.string() + ".tmp-" + std::to_string(::getpid());
-  try {
-    openvdb::io::File file(tmp.string());
-    file.write(grids);
-    file.close();
-  } catch (...) {
-    std::error_code ignored;
-    std::filesystem::remove(tmp, ignored);
-    throw;
-  }
-  std::filesystem::rename(tmp, path);
+  openvdb::io::File file(path.string());
+  file.write(grids);
+  file.close();
 }
 
 }  // namespace
@@ -81,9 +71,9 @@ extern "C" int scalefuse_export_vdb_v1(const char* path, const sf::SurfaceVoxel*
     sf::write_grids(path, voxels, count, *root);
     return 0;
   } catch (const std::exception& e) {
-    std::snprintf(error, error_size, "%s: cannot write VDB: %s", path, e.what());
+    std::snprintf(error, error_size, "%s", e.what());
   } catch (...) {
-    std::snprintf(error, error_size, "%s: cannot write VDB", path);
+    std::snprintf(error, error_size, "unknown error");
   }
   return 1;
 }
