@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Prints a 16-hex-digit hash of a job's field that does not depend on the tile format: sha256 of
-each brick's raw payload (formats 4 and 5 store the same raw bytes; format 5 cuts them into chunks),
+each brick's raw payload (formats 4 to 6 store the same raw bytes; format 5 cuts them into chunks,
+format 6 compresses each chunk's byte planes),
 keyed by brick. Two binaries that write different tile formats give the same hash for the same
 field. Decompresses with the system's liblz4 (Debian package liblz4-1).
 Usage: bench/field_hash.py JOB/tiles"""
@@ -28,12 +29,19 @@ def raw_payload(path):
     version, raw_size = struct.unpack_from("<I", data, 8)[0], struct.unpack_from("<Q", data, 32)[0]
     if version == 4:
         return unpack(data[64:], raw_size)
-    if version != 5:
-        sys.exit(f"{path}: tile format {version}, this script reads 4 and 5")
+    if version not in (5, 6):
+        sys.exit(f"{path}: tile format {version}, this script reads 4 to 6")
     parts, at = [], 64
     while at < len(data):
         raw_n, stored_n = struct.unpack_from("<II", data, at)
-        parts.append(unpack(data[at + 16:at + 16 + stored_n], raw_n))
+        chunk = unpack(data[at + 16:at + 16 + stored_n], raw_n)
+        if version == 6:  # byte b of 16-byte unit i is at b n + i
+            n = raw_n // 16
+            units = bytearray(raw_n)
+            for b in range(16):
+                units[b::16] = chunk[b * n:(b + 1) * n]
+            chunk = bytes(units)
+        parts.append(chunk)
         at += 16 + stored_n
     return b"".join(parts)
 

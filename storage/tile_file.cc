@@ -10,6 +10,7 @@
 #include <bit>
 #include <cerrno>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -20,6 +21,7 @@
 #include <vector>
 
 #include "engine/error.h"
+#include "storage/byte_planes.h"
 
 namespace sf {
 namespace {
@@ -90,6 +92,10 @@ constexpr bool stores_presence(std::uint32_t version) { return version >= 4; }
 // memory and back before LZ4 read them. 256 KiB stay in the core's L2 cache; LZ4's window
 // is 64 KiB, so independent chunks compress about as well as one block (igea's tiles +0.04 %).
 constexpr bool stores_chunks(std::uint32_t version) { return version >= 5; }
+// From format 6 LZ4 compresses a chunk's byte planes (storage/byte_planes.h), not its raw bytes:
+// igea's checkpoint 0.89 -> 0.67 of the raw size, with less to write and sync for about as much
+// compression time (bench/README.md, session 35).
+constexpr bool stores_planes(std::uint32_t version) { return version >= 6; }
 constexpr std::size_t kChunkRaw = std::size_t{256} << 10;  // raw bytes of the writer's chunks, at most
 constexpr std::size_t kMaxChunkRaw = std::size_t{1} << 20;  // what a reader accepts
 // u32 raw bytes, u32 stored bytes, u64 XXH3-64 of the stored bytes: a chunk is checked before it
@@ -125,6 +131,19 @@ void put_float(unsigned char* p, float f) {
   std::uint32_t u;
   std::memcpy(&u, &f, 4);
   put32(p, u);
+}
+// A voxel's 16-byte record (formats 3 on). On a little-endian host it is the voxel's own bytes.
+void put_record(unsigned char* p, const VoxelData& v) {
+  if constexpr (std::endian::native == std::endian::little && offsetof(VoxelData, distance) == 0 &&
+                offsetof(VoxelData, weight) == 4 && offsetof(VoxelData, colour_fixed) == 8 &&
+                offsetof(VoxelData, colour_share) == 14) {
+    std::memcpy(p, &v, 16);
+  } else {
+    put_float(p, v.distance);
+    put_float(p + 4, v.weight);
+    for (int c = 0; c < 3; ++c) put16(p + 8 + 2 * c, v.colour_fixed[c]);
+    put16(p + 14, v.colour_share);
+  }
 }
 float get_float(const unsigned char* p) {
   const std::uint32_t u = get32(p);
@@ -169,12 +188,12 @@ XXH3State new_xxh3_state() {
   return s;
 }
 
-// The stored payload of a format-5 tile, streamed to `fd` chunk by chunk: blocks are packed into
+// The stored payload of a format-6 tile, streamed to `fd` chunk by chunk: blocks are packed into
 // the raw chunk until the next might not fit, then the chunk is compressed, hashed and written.
 class ChunkWriter {
  public:
   ChunkWriter(int fd, const std::filesystem::path& path, TileBuffers& pool)
-      : fd_(fd), path_(path), raw_(kChunkRaw, pool),
+      : fd_(fd), path_(path), raw_(kChunkRaw, pool), planes_(kChunkRaw, pool),
         stored_(kChunkHeader + std::size_t(LZ4_compressBound(int(kChunkRaw))), pool), hash_(new_xxh3_state()) {}
 
   // Room for `n` <= kMaxBlockRaw raw bytes; commit(n) after filling them.
@@ -198,7 +217,8 @@ class ChunkWriter {
   void flush() {
     if (used_ == 0) return;
     unsigned char* out = stored_.data();
-    const int packed = LZ4_compress_fast(reinterpret_cast<const char*>(raw_.data()),
+    to_byte_planes(raw_.data(), used_ / kPlaneUnit, planes_.data());  // every block is whole units
+    const int packed = LZ4_compress_fast(reinterpret_cast<const char*>(planes_.data()),
                                          reinterpret_cast<char*>(out + kChunkHeader), int(used_),
                                          int(stored_.size() - kChunkHeader), kAcceleration);
     if (packed <= 0) throw std::runtime_error(path_.string() + ": LZ4 compression failed");
@@ -214,7 +234,7 @@ class ChunkWriter {
 
   int fd_;
   const std::filesystem::path& path_;
-  PageBuffer raw_, stored_;
+  PageBuffer raw_, planes_, stored_;
   XXH3State hash_;
   std::size_t used_ = 0;  // raw bytes in the chunk under way
   std::uint64_t raw_bytes_ = 0, stored_bytes_ = 0;
@@ -288,6 +308,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
     throw std::length_error(path.string() + ": brick of " + std::to_string(blocks.size()) +
                             " blocks, more than a tile's u32 count; use a finer octree.brick_level");
   constexpr std::size_t kRecord = record_bytes(kTileVersion);
+  static_assert(kRecord == kPlaneUnit && kMaxBlockRaw % kPlaneUnit == 0, "a chunk is whole byte-plane units");
 
   // Temporary name in the same directory: header last (it holds the sizes and checksums), fsync,
   // rename, fsync the directory.
@@ -302,19 +323,18 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
     for (const BlockView& b : blocks) {
       const std::size_t n = std::size_t{1} << (3 * b.log);
       std::uint64_t mask = 0;
-      for (std::size_t i = 0; i < n; ++i) mask |= std::uint64_t(b.data[i].weight != 0) << i;
-      const std::size_t bytes = 16 + std::size_t(std::popcount(mask)) * kRecord;
+      std::size_t present = 0;  // counted here: baseline x86-64 has no popcount instruction
+      for (std::size_t i = 0; i < n; ++i) {
+        const bool in = b.data[i].weight != 0;
+        mask |= std::uint64_t(in) << i;
+        present += in;
+      }
+      const std::size_t bytes = 16 + present * kRecord;
       unsigned char* p = chunks.reserve(bytes);
       put64(p, b.origin.bits);
       put64(p + 8, mask);
       p += 16;
-      for (std::uint64_t m = mask; m != 0; m &= m - 1, p += kRecord) {
-        const VoxelData& v = b.data[std::countr_zero(m)];
-        put_float(p, v.distance);
-        put_float(p + 4, v.weight);
-        for (int c = 0; c < 3; ++c) put16(p + 8 + 2 * c, v.colour_fixed[c]);
-        put16(p + 14, v.colour_share);
-      }
+      for (std::uint64_t m = mask; m != 0; m &= m - 1, p += kRecord) put_record(p, b.data[std::countr_zero(m)]);
       chunks.commit(bytes);
     }
     const std::uint64_t payload_checksum = chunks.finish();
@@ -484,6 +504,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
       const bool any = stored_size > 0;  // an empty brick's tile has no chunk
       PageBuffer stored(any ? kChunkHeader + std::size_t(LZ4_compressBound(int(kMaxChunkRaw))) : 0, pool);
       PageBuffer raw(any ? kMaxChunkRaw : 0, pool);
+      PageBuffer planes(any && stores_planes(version) ? kMaxChunkRaw : 0, pool);
       const XXH3State hash = new_xxh3_state();
       std::uint64_t left = stored_size, raw_seen = 0;
       for (std::uint64_t chunk = 0; left > 0; ++chunk) {
@@ -495,6 +516,8 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
         const std::uint32_t raw_n = get32(s), stored_n = get32(s + 4);
         if (raw_n == 0 || raw_n > kMaxChunkRaw)
           throw bad(which + " of " + std::to_string(raw_n) + " raw bytes (1 to " + std::to_string(kMaxChunkRaw) + ")");
+        if (stores_planes(version) && raw_n % kPlaneUnit != 0)
+          throw bad(which + " of " + std::to_string(raw_n) + " raw bytes, not whole 16-byte units");
         if (stored_n == 0 || stored_n > std::uint32_t(LZ4_compressBound(int(raw_n))) || stored_n > left - kChunkHeader)
           throw bad(which + " of " + std::to_string(stored_n) + " stored bytes does not fit");
         in.read(reinterpret_cast<char*>(s + kChunkHeader), std::streamsize(stored_n));
@@ -504,9 +527,11 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
         left -= kChunkHeader + stored_n;
         raw_seen += raw_n;
         if (raw_seen > raw_size) throw bad("chunks hold more than the header's " + std::to_string(raw_size) + " raw bytes");
+        unsigned char* unpacked = stores_planes(version) ? planes.data() : raw.data();
         const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(s + kChunkHeader),
-                                          reinterpret_cast<char*>(raw.data()), int(stored_n), int(raw_n));
+                                          reinterpret_cast<char*>(unpacked), int(stored_n), int(raw_n));
         if (n < 0 || std::uint32_t(n) != raw_n) throw bad(which + " does not decompress to its stated size");
+        if (stores_planes(version)) from_byte_planes(planes.data(), raw_n / kPlaneUnit, raw.data());
         // A chunk holds whole blocks.
         const unsigned char* p = raw.data();
         const unsigned char* end = p + raw_n;

@@ -53,7 +53,7 @@ class TileStore {
 };
 
 // The tile buffers a store keeps for a job with this memory limit: 1/16 of it, 64 MiB at most
-// (a thread writing a tile takes 2 MiB of chunk buffers, one reading takes 3 MiB; whole images
+// (a thread writing a tile takes 3 MiB of chunk buffers, one reading takes 4 MiB; whole images
 // of older tiles' formats that do not fit are unmapped after use).
 inline std::size_t tile_buffer_budget(std::size_t memory_limit) {
   return std::min(memory_limit / 16, std::size_t{64} << 20);

@@ -1,9 +1,11 @@
 // Brick tiles on disk: round trip, byte-identical output whatever the insertion order, and every
 // kind of damage detected with the tile's name.
 #include "storage/tile_file.h"
+#include "storage/byte_planes.h"
 
 #include <gtest/gtest.h>
 #include <lz4.h>
+#include <xxhash.h>
 
 #include <algorithm>
 #include <bit>
@@ -51,6 +53,30 @@ std::vector<char> bytes_of(const std::filesystem::path& p) {
 }
 
 }  // namespace
+
+// Byte planes of 16-byte units, worked by hand for two units: unit 0 is bytes 0..15, unit 1 is
+// 100..115, so plane b is {b, 100 + b}; and a round trip through the vector path (16 units at a
+// time) and the byte path (the 5 left over) on 37 units.
+TEST(BytePlanes, PlaneBHoldsByteBOfEveryUnit) {
+  unsigned char two[32], planes[32], back[32];
+  for (int i = 0; i < 16; ++i) two[i] = static_cast<unsigned char>(i), two[16 + i] = static_cast<unsigned char>(100 + i);
+  to_byte_planes(two, 2, planes);
+  for (int b = 0; b < 16; ++b) {
+    EXPECT_EQ(planes[2 * b], b);
+    EXPECT_EQ(planes[2 * b + 1], 100 + b);
+  }
+  from_byte_planes(planes, 2, back);
+  EXPECT_TRUE(std::equal(two, two + 32, back));
+  constexpr std::size_t n = 37;
+  std::vector<unsigned char> units(16 * n), p(16 * n), u(16 * n);
+  std::mt19937 rng(3);
+  for (unsigned char& c : units) c = static_cast<unsigned char>(rng());
+  to_byte_planes(units.data(), n, p.data());
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t b = 0; b < 16; ++b) ASSERT_EQ(p[b * n + i], units[i * 16 + b]) << "unit " << i << " byte " << b;
+  from_byte_planes(p.data(), n, u.data());
+  EXPECT_EQ(u, units);
+}
 
 TEST(Tile, RoundTripKeepsEveryVoxelAndIsIndependentOfInsertionOrder) {
   const auto dir = scratch_dir("tile_round_trip");
@@ -131,12 +157,19 @@ TEST(Tile, EveryFlippedByteIsDetectedAndNamesTheTile) {
 // resumes: its tiles still read. A tile of a later format is refused by name, not as damage.
 namespace {
 
-// A tile of format 1 or 2 (24-byte voxels: six float32), 3 (every voxel of a block in 16 bytes) or
-// 4 (a presence mask per block, the present voxels in 16 bytes; one LZ4 block), laid out here from
+// A tile of format 1 or 2 (24-byte voxels: six float32), 3 (every voxel of a block in 16 bytes),
+// 4 (a presence mask per block, the present voxels in 16 bytes; one LZ4 block) or 5 and 6 (the same
+// raw payload in a chunk; 6 compresses its byte planes), laid out here from
 // the format's description rather than by this build's writer, which writes only the current format. With `colour`, every voxel's record of format 1-2 carries that float
 // colour and colour weight instead of its own.
 std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
                             const std::vector<unsigned char>& raw);
+// A tile of format 5 or 6 around raw chunks given one by one (sizes, checksums all valid), laid out
+// from the format's description: each chunk behind its raw and stored sizes and the XXH3-64 of its
+// stored bytes, LZ4 (at the writer's acceleration, 4) of its raw bytes (5) or of their byte planes
+// (6); the header's payload checksum is that of the chunk headers.
+std::vector<char> chunked_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::uint32_t block_count,
+                               const std::vector<std::vector<unsigned char>>& chunks);
 
 struct FloatColour {
   float colour[3];
@@ -165,10 +198,10 @@ std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const Vox
     put(raw, b.origin.bits, 8);
     std::uint64_t mask = 0;
     for (std::size_t i = 0; i < (std::size_t{1} << (3 * b.log)); ++i) mask |= std::uint64_t(b.data[i].weight != 0) << i;
-    if (version == 4) put(raw, mask, 8);
+    if (version >= 4) put(raw, mask, 8);
     for (std::size_t i = 0; i < (std::size_t{1} << (3 * b.log)); ++i) {
       const VoxelData& v = b.data[i];
-      if (version == 4 && !(mask >> i & 1)) continue;
+      if (version >= 4 && !(mask >> i & 1)) continue;
       put_float(v.distance);
       put_float(v.weight);
       if (version >= 3) {
@@ -180,6 +213,9 @@ std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const Vox
       put_float(colour ? colour->weight : v.colour_weight());
     }
   }
+  if (version >= 5)
+    return chunked_tile(version, coord, t.brick_level(), std::uint32_t(blocks.size()),
+                        raw.empty() ? std::vector<std::vector<unsigned char>>{} : std::vector<std::vector<unsigned char>>{raw});
   return wrap_tile(version, coord, t.brick_level(), blocks.size(), raw);
 }
 
@@ -219,6 +255,33 @@ std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_l
                     tile_checksum(version, stored.data(), stored.size()));
 }
 
+std::vector<char> chunked_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::uint32_t block_count,
+                               const std::vector<std::vector<unsigned char>>& chunks) {
+  std::vector<unsigned char> stored, chunk_headers;
+  std::uint64_t raw_bytes = 0;
+  for (const auto& raw : chunks) {
+    std::vector<unsigned char> input = raw;
+    if (version >= 6) {  // byte b of 16-byte unit i at b n + i
+      const std::size_t n = raw.size() / 16;
+      for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t b = 0; b < 16; ++b) input[b * n + i] = raw[i * 16 + b];
+    }
+    std::vector<char> packed(std::size_t(LZ4_compressBound(int(input.size()))));
+    packed.resize(std::size_t(LZ4_compress_fast(reinterpret_cast<const char*>(input.data()), packed.data(),
+                                                int(input.size()), int(packed.size()), 4)));
+    std::vector<unsigned char> header;
+    put_le(header, raw.size(), 4);
+    put_le(header, packed.size(), 4);
+    put_le(header, XXH3_64bits(packed.data(), packed.size()), 8);
+    chunk_headers.insert(chunk_headers.end(), header.begin(), header.end());
+    stored.insert(stored.end(), header.begin(), header.end());
+    stored.insert(stored.end(), packed.begin(), packed.end());
+    raw_bytes += raw.size();
+  }
+  return tile_bytes(version, coord, brick_level, block_count, raw_bytes, stored,
+                    XXH3_64bits(chunk_headers.data(), chunk_headers.size()));
+}
+
 void write_bytes(const std::filesystem::path& p, const std::vector<char>& b) {
   std::ofstream out(p, std::ios::binary);
   out.write(b.data(), std::streamsize(b.size()));
@@ -230,10 +293,12 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   const auto dir = scratch_dir("tile_versions");
   VoxelTable t(3);
   fill(t, sample_voxels());
-  const auto path = dir / "v5.tile";
+  const auto path = dir / "v6.tile";
   write_tile(path, {2, 0, 2}, t);
   const std::vector<char> bytes = bytes_of(path);
-  EXPECT_EQ(bytes[8], 5);  // this build writes format 5
+  EXPECT_EQ(bytes[8], 6);  // this build writes format 6
+  // ... byte for byte as the format's description lays it out.
+  EXPECT_EQ(bytes, legacy_tile(6, {2, 0, 2}, t));
   // Format 3's 16-byte voxels against formats 1-2's 24: the same voxels, a smaller raw payload;
   // format 4 keeps the present voxels only, behind a u64 mask per block.
   const std::vector<char> v2 = legacy_tile(2, {2, 0, 2}, t);
@@ -252,11 +317,14 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   write_bytes(dir / "v3.tile", v3);
   write_bytes(dir / "v2.tile", v2);
   write_bytes(dir / "v1.tile", legacy_tile(1, {2, 0, 2}, t));
-  // Format 4 is format 5's raw payload in one LZ4 block.
+  // Format 4 is format 6's raw payload in one LZ4 block; format 5 compressed the chunk's raw bytes.
   const std::vector<char> v4 = legacy_tile(4, {2, 0, 2}, t);
   EXPECT_EQ(raw_size(v4), raw_size(bytes));
   write_bytes(dir / "v4.tile", v4);
-  for (const char* name : {"v1.tile", "v2.tile", "v3.tile", "v4.tile", "v5.tile"}) {
+  const std::vector<char> v5 = legacy_tile(5, {2, 0, 2}, t);
+  EXPECT_EQ(raw_size(v5), raw_size(bytes));
+  write_bytes(dir / "v5.tile", v5);
+  for (const char* name : {"v1.tile", "v2.tile", "v3.tile", "v4.tile", "v5.tile", "v6.tile"}) {
     SCOPED_TRACE(name);
     VoxelTable b(3);
     read_tile(dir / name, b);
@@ -317,11 +385,11 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
     VoxelTable fresh(3);
     read_tile(dir / "relabelled3.tile", fresh);
   }, "relabelled3.tile", "damaged tile");
-  write_bytes(dir / "v6.tile", rewrite(bytes, 6, xxh3));
+  write_bytes(dir / "v7.tile", rewrite(bytes, 7, xxh3));
   expect_input_error([&] {
     VoxelTable fresh(3);
-    read_tile(dir / "v6.tile", fresh);
-  }, "v6.tile", "format version 6, this build reads 1 to 5");
+    read_tile(dir / "v7.tile", fresh);
+  }, "v7.tile", "format version 7, this build reads 1 to 6");
 }
 
 // Format 4 stores a mask of the present voxels per block: erased voxels (weight < 0) are present
@@ -495,31 +563,8 @@ TEST(Tile, ReusedBuffersChangeNoByteOfATile) {
 
 namespace {
 
-// A format-5 tile around raw chunks given one by one (LZ4, sizes, checksums all valid), laid out
-// from the format's description: each chunk behind its raw and stored sizes and the XXH3-64 of its
-// stored bytes; the header's payload checksum is that of the chunk headers.
-std::vector<char> chunked_tile(BrickCoord coord, int brick_level, std::uint32_t block_count,
-                               const std::vector<std::vector<unsigned char>>& chunks) {
-  std::vector<unsigned char> stored, chunk_headers;
-  std::uint64_t raw_bytes = 0;
-  for (const auto& raw : chunks) {
-    std::vector<char> packed(std::size_t(LZ4_compressBound(int(raw.size()))));
-    packed.resize(std::size_t(LZ4_compress_default(reinterpret_cast<const char*>(raw.data()), packed.data(),
-                                                   int(raw.size()), int(packed.size()))));
-    std::vector<unsigned char> header;
-    put_le(header, raw.size(), 4);
-    put_le(header, packed.size(), 4);
-    put_le(header, tile_checksum(5, packed.data(), packed.size()), 8);
-    chunk_headers.insert(chunk_headers.end(), header.begin(), header.end());
-    stored.insert(stored.end(), header.begin(), header.end());
-    stored.insert(stored.end(), packed.begin(), packed.end());
-    raw_bytes += raw.size();
-  }
-  return tile_bytes(5, coord, brick_level, block_count, raw_bytes, stored,
-                    tile_checksum(5, chunk_headers.data(), chunk_headers.size()));
-}
-
-// The raw chunks of a format-5 tile's bytes (each decompressed).
+// The raw chunks of a format-5 or 6 tile's bytes (each decompressed; a format-6 chunk's planes
+// put back into units).
 std::vector<std::vector<unsigned char>> raw_chunks(const std::vector<char>& tile) {
   auto get32 = [&](std::size_t at) {
     std::uint32_t v = 0;
@@ -532,6 +577,13 @@ std::vector<std::vector<unsigned char>> raw_chunks(const std::vector<char>& tile
     std::vector<unsigned char> raw(raw_n);
     EXPECT_EQ(LZ4_decompress_safe(tile.data() + at + 16, reinterpret_cast<char*>(raw.data()), int(stored_n), int(raw_n)),
               int(raw_n));
+    if (get32(8) >= 6) {
+      std::vector<unsigned char> units(raw_n);
+      const std::size_t n = raw_n / 16;
+      for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t b = 0; b < 16; ++b) units[i * 16 + b] = raw[b * n + i];
+      raw = std::move(units);
+    }
     out.push_back(std::move(raw));
     at += 16 + stored_n;
   }
@@ -571,6 +623,8 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
     }
     joined.insert(joined.end(), chunks[i].begin(), chunks[i].end());
   }
+  // The writer's tile is the format's description laid out here, byte for byte.
+  EXPECT_EQ(bytes, chunked_tile(6, {2, 0, 2}, 3, std::uint32_t(t.block_count()), chunks));
   // Joined, the chunks are format 4's raw payload, byte for byte.
   const std::vector<char> v4 = legacy_tile(4, {2, 0, 2}, t);
   std::vector<unsigned char> v4_raw(joined.size());
@@ -607,21 +661,32 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
                                                    std::vector<unsigned char>(joined.begin() + at, joined.begin() + tail),
                                                    std::vector<unsigned char>(joined.begin() + tail, joined.end())};
   };
-  write_bytes(dir / "recut.tile", chunked_tile({2, 0, 2}, 3, blocks, cut(two)));
+  write_bytes(dir / "recut.tile", chunked_tile(6, {2, 0, 2}, 3, blocks, cut(two)));
   VoxelTable recut_back(3);
   read_tile(dir / "recut.tile", recut_back);
   EXPECT_EQ(recut_back.live_count(), t.live_count());
-  write_bytes(dir / "torn.tile", chunked_tile({2, 0, 2}, 3, blocks, cut(two - 7)));
+  // Cut inside a block: in format 5 anywhere, in format 6 at a 16-byte unit (a chunk of format 6
+  // is whole units, since its planes are).
+  write_bytes(dir / "torn.tile", chunked_tile(5, {2, 0, 2}, 3, blocks, cut(two - 7)));
   VoxelTable torn_back(3);
   expect_input_error([&] { read_tile(dir / "torn.tile", torn_back); }, "torn.tile", "runs past the payload");
   EXPECT_EQ(torn_back.block_count(), 0u);
+  write_bytes(dir / "torn6.tile", chunked_tile(6, {2, 0, 2}, 3, blocks, cut(two - 16)));
+  VoxelTable torn6_back(3);
+  expect_input_error([&] { read_tile(dir / "torn6.tile", torn6_back); }, "torn6.tile", "runs past the payload");
+  EXPECT_EQ(torn6_back.block_count(), 0u);
+  write_bytes(dir / "odd6.tile", chunked_tile(6, {2, 0, 2}, 3, blocks, cut(two - 7)));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "odd6.tile", fresh);
+  }, "odd6.tile", "chunk 0 of " + std::to_string(two - 7) + " raw bytes, not whole 16-byte units");
   // Block counts against the header: one more, one fewer.
-  write_bytes(dir / "more.tile", chunked_tile({2, 0, 2}, 3, blocks + 1, chunks));
+  write_bytes(dir / "more.tile", chunked_tile(6, {2, 0, 2}, 3, blocks + 1, chunks));
   expect_input_error([&] {
     VoxelTable fresh(3);
     read_tile(dir / "more.tile", fresh);
   }, "more.tile", std::to_string(blocks) + " blocks, header says " + std::to_string(blocks + 1));
-  write_bytes(dir / "fewer.tile", chunked_tile({2, 0, 2}, 3, blocks - 1, chunks));
+  write_bytes(dir / "fewer.tile", chunked_tile(6, {2, 0, 2}, 3, blocks - 1, chunks));
   VoxelTable fewer_back(3);
   expect_input_error([&] { read_tile(dir / "fewer.tile", fewer_back); }, "fewer.tile",
                      "more blocks than the header's " + std::to_string(blocks - 1));
@@ -636,7 +701,7 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
     EXPECT_EQ(fresh.block_count(), 0u) << "the chunks before the damaged one are dropped again";
   }
   // A chunk of more than 1 MiB is refused before anything is allocated for it.
-  write_bytes(dir / "huge.tile", chunked_tile({2, 0, 2}, 3, blocks, {joined}));
+  write_bytes(dir / "huge.tile", chunked_tile(6, {2, 0, 2}, 3, blocks, {joined}));
   expect_input_error([&] {
     VoxelTable fresh(3);
     read_tile(dir / "huge.tile", fresh);
