@@ -4,8 +4,8 @@
 //   cmake -S . -B build-bench -DSCALEFUSE_BUILD_BENCH=ON && cmake --build build-bench -j2 --target extract_bench
 //   build-bench/bin/extract_bench [level=8] [band_cells=3] [threads=1,2]
 // or against sf_extract alone (from a build dir that has built it):
-//   g++ -O3 -DNDEBUG -std=c++20 -I.. -I/usr/include/eigen3 ../bench/extract_bench.cc libsf_extract.a \
-//       -o extract_bench -ltbb -ltbbmalloc -lgmp
+//   g++ -O3 -DNDEBUG -std=c++20 -I.. -I/usr/include/eigen3 ../bench/extract_bench.cc libsf_extract.a
+//       -o extract_bench -ltbb -ltbbmalloc -lgmp   (one command)
 // level 8 with a 3-cell band on each side is about 1.0 M voxels (sphere radius 0.45 of the root).
 #include <tbb/task_arena.h>
 

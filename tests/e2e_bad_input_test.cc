@@ -108,14 +108,22 @@ void expect_bad(const CliRun& r, const fs::path& out, const std::string& file, c
   EXPECT_FALSE(fs::exists(out)) << out;
   // Nor a job folder: a fuse that stopped on bad input before integrating anything leaves none.
   EXPECT_FALSE(fs::exists(out.string() + ".job")) << out << ".job";
-  if (fs::exists(out.parent_path()))
-    for (const auto& e : fs::recursive_directory_iterator(out.parent_path()))
+  if (fs::exists(out.parent_path())) {
+    for (const auto& e : fs::recursive_directory_iterator(out.parent_path())) {
       EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << "left behind " << e.path();
+    }
+  }
 }
 
 // One malformed case: `mutate` breaks a copy of the reader's valid scene in `input`; the fuse (or
 // `command`, with {in} and {out} replaced) must fail as expect_bad says.
 struct Case {
+  // A constructor rather than an aggregate, so that the many cases without the last two fields
+  // need not spell them out (GCC warns of each omitted field otherwise).
+  Case(std::string name, std::function<void(const fs::path& input)> mutate, std::string file, std::string what,
+       bool unprivileged = false, std::string flags = {})
+      : name(std::move(name)), mutate(std::move(mutate)), file(std::move(file)), what(std::move(what)),
+        unprivileged(unprivileged), flags(std::move(flags)) {}
   std::string name;
   std::function<void(const fs::path& input)> mutate;
   std::string file, what;

@@ -128,7 +128,7 @@ TEST(Mailbox, AUnionOfTilesFilesCollectsAsOneMailbox) {
   for (int t = 0; t < 3; ++t) tiles.push_back(std::make_unique<Mailbox>(dir.path() / ("tile" + std::to_string(t)), "box"));
   for (std::uint32_t i = 0; i < 60; ++i) {
     const std::uint64_t dest = i % 5, src = (i * 7) % 12;  // source s belongs to tile s % 3
-    const std::vector<std::uint32_t> record{i, dest * 100 + src};
+    const std::vector<std::uint32_t> record{i, std::uint32_t(dest * 100 + src)};
     one.post(dest, src, record);
     tiles[src % 3]->post(dest, src, record);
   }

@@ -416,7 +416,9 @@ TEST(ExtractSurface, BrickByBrickGivesTheGlobalMesh) {
           // Bricks grouped: less halo (and fewer duplicate levels) to triangulate.
           EXPECT_LT(st.window_points + st.window_voxels_in_cubes, points_one_brick);
         }
-        if (group == ExtractOptions{}.window_group_voxels) EXPECT_EQ(st.window_points + st.window_voxels_in_cubes, st.voxels);
+        if (group == ExtractOptions{}.window_group_voxels) {
+          EXPECT_EQ(st.window_points + st.window_voxels_in_cubes, st.voxels);
+        }
       }
     }
   }
