@@ -164,6 +164,21 @@ namespace {
 // colour and colour weight instead of its own.
 std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
                             const std::vector<unsigned char>& raw);
+// Byte planes of 16-byte units as the format describes them (byte b of unit i at b n + i), or back
+// (`to_planes` false), a byte at a time: the tests' oracle, independent of storage/byte_planes.
+std::vector<unsigned char> planes_by_hand(const std::vector<unsigned char>& in, bool to_planes) {
+  std::vector<unsigned char> out = in;  // a tail short of a unit stays as it is
+  const std::size_t n = in.size() / 16;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t b = 0; b < 16; ++b) {
+      if (to_planes)
+        out[b * n + i] = in[i * 16 + b];
+      else
+        out[i * 16 + b] = in[b * n + i];
+    }
+  return out;
+}
+
 // A tile of format 5 or 6 around raw chunks given one by one (sizes, checksums all valid), laid out
 // from the format's description: each chunk behind its raw and stored sizes and the XXH3-64 of its
 // stored bytes, LZ4 (at the writer's acceleration, 4) of its raw bytes (5) or of their byte planes
@@ -260,12 +275,7 @@ std::vector<char> chunked_tile(std::uint32_t version, BrickCoord coord, int bric
   std::vector<unsigned char> stored, chunk_headers;
   std::uint64_t raw_bytes = 0;
   for (const auto& raw : chunks) {
-    std::vector<unsigned char> input = raw;
-    if (version >= 6) {  // byte b of 16-byte unit i at b n + i
-      const std::size_t n = raw.size() / 16;
-      for (std::size_t i = 0; i < n; ++i)
-        for (std::size_t b = 0; b < 16; ++b) input[b * n + i] = raw[i * 16 + b];
-    }
+    const std::vector<unsigned char> input = version >= 6 ? planes_by_hand(raw, true) : raw;
     std::vector<char> packed(std::size_t(LZ4_compressBound(int(input.size()))));
     packed.resize(std::size_t(LZ4_compress_fast(reinterpret_cast<const char*>(input.data()), packed.data(),
                                                 int(input.size()), int(packed.size()), 4)));
@@ -577,13 +587,7 @@ std::vector<std::vector<unsigned char>> raw_chunks(const std::vector<char>& tile
     std::vector<unsigned char> raw(raw_n);
     EXPECT_EQ(LZ4_decompress_safe(tile.data() + at + 16, reinterpret_cast<char*>(raw.data()), int(stored_n), int(raw_n)),
               int(raw_n));
-    if (get32(8) >= 6) {
-      std::vector<unsigned char> units(raw_n);
-      const std::size_t n = raw_n / 16;
-      for (std::size_t i = 0; i < n; ++i)
-        for (std::size_t b = 0; b < 16; ++b) units[i * 16 + b] = raw[b * n + i];
-      raw = std::move(units);
-    }
+    if (get32(8) >= 6) raw = planes_by_hand(raw, false);
     out.push_back(std::move(raw));
     at += 16 + stored_n;
   }
