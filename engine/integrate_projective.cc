@@ -610,6 +610,121 @@ struct RowBatch {
   }
 };
 
+// Phase 1 of the kernel for one column: the voxels ia in [i0, i1] (centre `base` moved by h ia
+// along axis `ax`) whose projection falls in the tile's quads [c0, c1) x [r0, r1) join the batch
+// from index n; returns the new count. `terms` holds the column's fixed axes' camera terms.
+struct ColumnTile {
+  int c0, c1, r0, r1;  // the tile's pixel quads
+};
+[[maybe_unused]] std::size_t project_column_scalar(const Sensor& sensor, double terms[3][3], const Vector3d& base,
+                                                   int ax, double h, std::int64_t i0, std::int64_t i1, std::int64_t ic,
+                                                   ColumnTile t, RowBatch& batch, std::size_t n) {
+  for (std::int64_t ia = i0; ia <= i1; ++ia) {
+    Vector3d X = base;
+    X[ax] += h * double(ia);
+    camera_terms(sensor.R, X, ax, terms);
+    const Vector3d xs = camera_point(terms, sensor.t);
+    if (!(xs.z() > 0)) continue;
+    const Vector2d q = pixel_of(sensor, xs);
+    const int col = fast_floor(q.x() - 0.5), row = fast_floor(q.y() - 0.5);
+    if (!(col >= t.c0 && col < t.c1 && row >= t.r0 && row < t.r1)) continue;  // another tile's voxel
+    Candidate& cand = batch.cand[n++];
+    cand.X = X;
+    cand.q = q;
+    cand.col = col, cand.row = row;
+    cand.ia = std::int32_t(ia), cand.ic = std::int32_t(ic);
+  }
+  return n;
+}
+
+#if defined(__SSE2__) && defined(__x86_64__)
+// project_column_scalar two voxels at a time, one per lane: the same operations on each voxel in
+// the same order (camera_point's sums grouped as there, with the column's own term in its place
+// among the three), so the same bits, in about half the instructions. Both lanes are written to
+// the batch and the count moves past those kept, so the batch needs room for one more.
+template <int AX>
+std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3], const Vector3d& base, double h,
+                                 std::int64_t i0, std::int64_t i1, std::int64_t ic, ColumnTile t, RowBatch& batch,
+                                 std::size_t n) {
+  constexpr int B = (AX + 1) % 3, C = (AX + 2) % 3;
+  // Per camera coordinate i: the lanes' term v = R(i, AX) X[AX], then s = v + k1, s = s + k2 (if
+  // any), s = s + t_i, which is camera_point's grouping: rows 0 and 1 sum the terms 0, 1, 2 left
+  // to right, row 2 sums terms 1 and 2 first.
+  double k1[3], k2[3];
+  bool has_k2[3];
+  for (int i = 0; i < 2; ++i) {
+    if (AX == 0) k1[i] = terms[1][i], k2[i] = terms[2][i], has_k2[i] = true;       // ((v + T1) + T2)
+    if (AX == 1) k1[i] = terms[0][i], k2[i] = terms[2][i], has_k2[i] = true;       // ((T0 + v) + T2)
+    if (AX == 2) k1[i] = terms[0][i] + terms[1][i], k2[i] = 0, has_k2[i] = false;  // ((T0 + T1) + v)
+  }
+  if (AX == 0) k1[2] = terms[1][2] + terms[2][2], k2[2] = 0, has_k2[2] = false;  // (v + (T1 + T2))
+  if (AX == 1) k1[2] = terms[2][2], k2[2] = terms[0][2], has_k2[2] = true;       // (T0 + (v + T2))
+  if (AX == 2) k1[2] = terms[1][2], k2[2] = terms[0][2], has_k2[2] = true;       // (T0 + (T1 + v))
+  const __m128d hv = _mm_set1_pd(h), base_a = _mm_set1_pd(base[AX]);
+  __m128d r[3], kk1[3], kk2[3], tt[3];
+  for (int i = 0; i < 3; ++i) {
+    r[i] = _mm_set1_pd(sensor.R(i, AX));
+    kk1[i] = _mm_set1_pd(k1[i]);
+    kk2[i] = _mm_set1_pd(k2[i]);
+    tt[i] = _mm_set1_pd(sensor.t[i]);
+  }
+  const __m128d fx = _mm_set1_pd(sensor.fx), fy = _mm_set1_pd(sensor.fy), cx = _mm_set1_pd(sensor.cx),
+                cy = _mm_set1_pd(sensor.cy), one = _mm_set1_pd(1.0), half = _mm_set1_pd(0.5);
+  const __m128i c0 = _mm_set1_epi32(t.c0 - 1), c1 = _mm_set1_epi32(t.c1), r0 = _mm_set1_epi32(t.r0 - 1),
+                r1 = _mm_set1_epi32(t.r1);
+  // fast_floor per lane: truncate, and one less where that rounded up.
+  auto floor_lanes = [](__m128d x) {
+    const __m128i i = _mm_cvttpd_epi32(x);  // lanes 0, 1
+    const __m128d up = _mm_cmpgt_pd(_mm_cvtepi32_pd(i), x);
+    return _mm_add_epi32(i, _mm_shuffle_epi32(_mm_castpd_si128(up), _MM_SHUFFLE(3, 3, 2, 0)));
+  };
+  for (std::int64_t ia = i0; ia <= i1; ia += 2) {
+    const __m128d xa = _mm_add_pd(base_a, _mm_mul_pd(hv, _mm_set_pd(double(ia + 1), double(ia))));
+    __m128d xs[3];
+    for (int i = 0; i < 3; ++i) {
+      __m128d s = _mm_add_pd(_mm_mul_pd(r[i], xa), kk1[i]);
+      if (has_k2[i]) s = _mm_add_pd(s, kk2[i]);
+      xs[i] = _mm_add_pd(s, tt[i]);
+    }
+    const int in_front = _mm_movemask_pd(_mm_cmpgt_pd(xs[2], _mm_setzero_pd()));
+    const __m128d iz = _mm_div_pd(one, xs[2]);
+    const __m128d qx = _mm_add_pd(_mm_mul_pd(_mm_mul_pd(fx, xs[0]), iz), cx);
+    const __m128d qy = _mm_add_pd(_mm_mul_pd(_mm_mul_pd(fy, xs[1]), iz), cy);
+    const __m128i col = floor_lanes(_mm_sub_pd(qx, half)), row = floor_lanes(_mm_sub_pd(qy, half));
+    const __m128i in_tile = _mm_and_si128(_mm_and_si128(_mm_cmpgt_epi32(col, c0), _mm_cmpgt_epi32(c1, col)),
+                                          _mm_and_si128(_mm_cmpgt_epi32(row, r0), _mm_cmpgt_epi32(r1, row)));
+    const int last = ia + 1 <= i1 ? 3 : 1;  // the second lane is past the column's end
+    const int keep = in_front & _mm_movemask_ps(_mm_castsi128_ps(in_tile)) & last;
+    const __m128i colrow = _mm_unpacklo_epi32(col, row);  // col0 row0 col1 row1
+    for (int lane = 0; lane < 2; ++lane) {
+      Candidate& cand = batch.cand[n];
+      const __m128d x = lane == 0 ? xa : _mm_unpackhi_pd(xa, xa);
+      const __m128d q = lane == 0 ? _mm_unpacklo_pd(qx, qy) : _mm_unpackhi_pd(qx, qy);
+      cand.X[AX] = _mm_cvtsd_f64(x);
+      cand.X[B] = base[B];
+      cand.X[C] = base[C];
+      _mm_storeu_pd(cand.q.data(), q);
+      _mm_storel_epi64(reinterpret_cast<__m128i*>(&cand.col), lane == 0 ? colrow : _mm_srli_si128(colrow, 8));
+      cand.ia = std::int32_t(ia + lane), cand.ic = std::int32_t(ic);
+      n += std::size_t(keep >> lane & 1);
+    }
+  }
+  return n;
+}
+#endif
+
+std::size_t project_column(const Sensor& sensor, double terms[3][3], const Vector3d& base, int ax, double h,
+                           std::int64_t i0, std::int64_t i1, std::int64_t ic, ColumnTile t, RowBatch& batch,
+                           std::size_t n) {
+#if defined(__SSE2__) && defined(__x86_64__)
+  if (ax == 0) return project_column_pairs<0>(sensor, terms, base, h, i0, i1, ic, t, batch, n);
+  if (ax == 1) return project_column_pairs<1>(sensor, terms, base, h, i0, i1, ic, t, batch, n);
+  return project_column_pairs<2>(sensor, terms, base, h, i0, i1, ic, t, batch, n);
+#else
+  return project_column_scalar(sensor, terms, base, ax, h, i0, i1, ic, t, batch, n);
+#endif
+}
+
 bool has_prisms(const Prepared& p, int tile, int level) {
   const TileLevel& tl = p.tile_level(tile, level);
   return tl.zmin <= tl.zmax;
@@ -755,23 +870,10 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
             camera_terms(R, base, bx, terms);
             camera_terms(R, base, cx, terms);
-            if (i1 >= i0 && n + std::size_t(i1 - i0 + 1) > batch.size()) batch.grow(n + std::size_t(i1 - i0 + 1));
+            // Room for every voxel of the column and one more (project_column_pairs).
+            if (i1 >= i0 && n + std::size_t(i1 - i0 + 2) > batch.size()) batch.grow(n + std::size_t(i1 - i0 + 2));
             // Phase 1: project; keep the voxels whose quad is this tile's.
-            for (std::int64_t ia = i0; ia <= i1; ++ia) {
-              Vector3d X = base;
-              X[ax] += h * double(ia);
-              camera_terms(R, X, ax, terms);
-              const Vector3d xs = camera_point(terms, sensor.t);
-              if (!(xs.z() > 0)) continue;
-              const Vector2d q = pixel_of(sensor, xs);
-              const int col = fast_floor(q.x() - 0.5), row = fast_floor(q.y() - 0.5);
-              if (!(col >= c0 && col < c1 && row >= r0 && row < r1)) continue;  // another tile's voxel
-              Candidate& cand = batch.cand[n++];
-              cand.X = X;
-              cand.q = q;
-              cand.col = col, cand.row = row;
-              cand.ia = std::int32_t(ia), cand.ic = std::int32_t(ic);
-            }
+            if (i1 >= i0) n = project_column(sensor, terms, base, ax, h, i0, i1, ic, ColumnTile{c0, c1, r0, r1}, batch, n);
           }
           // Phase 2: the owner, one of the quad's triangles (the likelier first), or, on the
           // quad's left or top border, one of the neighbouring quads' (edge functions give a
@@ -784,27 +886,32 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             Candidate& cand = batch.cand[k];
             const Vector2d q = cand.q;
             const int col = cand.col, row = cand.row;
-            auto try_triangle = [&](const Quad& qd, int slot, int qr, int qc) {
+            // q in the quad's coordinates, [0.5, 1.5) each (exact: see Ownership::edge_local).
+            const double U = q.x() - double(col), V = q.y() - double(row);
+            auto try_triangle = [&](const Quad& qd, int slot, double u, double v) {
               const std::uint8_t code = qd.shape[slot];
               if (!(code & Quad::kUsable)) return false;
               const Ownership& s = shapes.shape[code & 63];
-              if (!s.owns(q, double(qc), double(qr), cand.E)) return false;
+              if (!s.owns_local(u, v, cand.E)) return false;
               cand.owner = qd.tri[slot];
               cand.shape = &s;
               return true;
             };
-            auto try_quad = [&](int qr, int qc, bool first_guess) {
+            // The quad d columns left and e rows up of q's own, where q's coordinates are one more.
+            auto try_quad = [&](int d, int e, bool first_guess) {
+              const int qr = row - e, qc = col - d;
               if (qr < 0 || qc < 0) return false;
               const Quad& qd = quad[std::size_t(qr) * QW + qc];
               const int first = first_guess ? 0 : 1;
-              return try_triangle(qd, first, qr, qc) || try_triangle(qd, 1 - first, qr, qc);
+              const double u = U + double(d), v = V + double(e);
+              return try_triangle(qd, first, u, v) || try_triangle(qd, 1 - first, u, v);
             };
             const Quad& here = quad[std::size_t(row) * QW + col];
-            const bool guess = (q.x() - 1.0 - col) * here.dx + (q.y() - 1.0 - row) * here.dy >= 0;
-            if (!try_quad(row, col, guess)) {
-              const bool left = q.x() - 0.5 == col, top = q.y() - 0.5 == row;
-              if (!((left && try_quad(row, col - 1, true)) || (top && try_quad(row - 1, col, true)) ||
-                    (left && top && try_quad(row - 1, col - 1, true))))
+            const bool guess = (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0;
+            if (!try_quad(0, 0, guess)) {
+              const bool left = U == 0.5, top = V == 0.5;
+              if (!((left && try_quad(1, 0, true)) || (top && try_quad(0, 1, true)) ||
+                    (left && top && try_quad(1, 1, true))))
                 continue;
             }
             __builtin_prefetch(&tris[cand.owner]);  // read in the next phase

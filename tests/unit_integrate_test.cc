@@ -348,62 +348,72 @@ TEST(IntegrateKernel, ColourInLanesEqualsTheScalarReference) {
 // voxels with bit-identical distances, weights and colours. The scene is made to stress it: an
 // oblique camera over a wavy surface with a depth step (dropped triangles, levels changing across
 // tiles), confidences and colours, several levels and a tile size that does not divide the image.
+// Three views, looking mostly along world z, x and y, so that the voxel-centric path marches its
+// columns along each axis (its projection is written once per axis).
 TEST(Integrate, VoxelCentricEnumerationEqualsPrisms) {
-  DepthFrame f;
-  f.name = "wavy";
-  f.width = 37;
-  f.height = 29;
-  f.sensor.fx = 30;
-  f.sensor.fy = 33;
-  f.sensor.cx = 18.2;
-  f.sensor.cy = 14.9;
-  const Eigen::Vector3d C(0.31, -0.23, 0.07);
-  const Eigen::Vector3d z = Eigen::Vector3d(0.45, 0.6, 1).normalized(), x = Eigen::Vector3d::UnitY().cross(z).normalized();
-  f.sensor.R.row(0) = x;
-  f.sensor.R.row(1) = z.cross(x);
-  f.sensor.R.row(2) = z;
-  f.sensor.t = -f.sensor.R * C;
-  std::vector<float> depth(f.size());
-  for (int r = 0; r < f.height; ++r)
-    for (int c = 0; c < f.width; ++c)
-      depth[r * f.width + c] = float(1.2 + 0.03 * c + 0.05 * std::sin(0.7 * r) + (c > 22 ? 0.5 : 0.0));
-  depth[5 * f.width + 7] = 0;  // a hole
-  fill_perspective_samples(f, depth, false);
-  f.confidence.resize(f.size());
-  f.colour.resize(f.size());
-  for (std::size_t i = 0; i < f.size(); ++i) {
-    f.confidence[i] = float(0.5 + 0.5 * std::cos(0.1 * double(i)));
-    f.colour[i] = {std::uint8_t(i % 256), std::uint8_t((7 * i) % 256), std::uint8_t((13 * i) % 256)};
-  }
-  const auto tris = triangulate(f, {});
-  const RootCube root{Eigen::Vector3d(-1, -1, 0), 3.3};
-  for (double gamma : {2.0, 6.0}) {
-    IntegrateOptions opt;
-    opt.gamma = gamma;
-    opt.coarser_levels = 3;
-    BrickMap prisms(2), projective(3);
-    const IntegrateStats a = integrate_frame_prisms(f, tris, root, opt, prisms);
-    IntegrateStats b;
-    ASSERT_TRUE(integrate_frame_projective(f, tris, root, opt, projective, &b));
-    EXPECT_EQ(a.triangles, b.triangles);
-    EXPECT_EQ(a.contributions, b.contributions);
-    ASSERT_GT(a.contributions, 1000u);
-    std::size_t compared = 0, levels = 0;
-    std::set<int> seen_levels;
-    for (Brick* br : prisms.bricks())
-      br->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
-        const VoxelData* w = projective.find(k);
-        ASSERT_NE(w, nullptr) << "level " << k.level() << " voxel " << k.x() << "," << k.y() << "," << k.z();
-        EXPECT_EQ(v.distance, w->distance);
-        EXPECT_EQ(v.weight, w->weight);
-        for (int c = 0; c < 3; ++c) EXPECT_EQ(v.colour_fixed[c], w->colour_fixed[c]);
-        EXPECT_EQ(v.colour_share, w->colour_share);
-        seen_levels.insert(k.level());
-        ++compared;
-      });
-    levels = seen_levels.size();
-    EXPECT_EQ(compared, projective.voxel_count());
-    EXPECT_GE(levels, 4u);
+  struct View {
+    Eigen::Vector3d centre, axis;
+  };
+  for (const View& view : {View{{0.31, -0.23, 0.07}, {0.45, 0.6, 1}}, View{{-0.9, 0.5, 1.0}, {1, 0.3, 0.45}},
+                           View{{0.5, -0.9, 1.0}, {0.4, 1, 0.3}}}) {
+    SCOPED_TRACE("view along " + std::to_string(view.axis.x()) + "," + std::to_string(view.axis.y()) + "," +
+                 std::to_string(view.axis.z()));
+    DepthFrame f;
+    f.name = "wavy";
+    f.width = 37;
+    f.height = 29;
+    f.sensor.fx = 30;
+    f.sensor.fy = 33;
+    f.sensor.cx = 18.2;
+    f.sensor.cy = 14.9;
+    const Eigen::Vector3d C = view.centre;
+    const Eigen::Vector3d z = view.axis.normalized(), x = Eigen::Vector3d::UnitY().cross(z).normalized();
+    f.sensor.R.row(0) = x;
+    f.sensor.R.row(1) = z.cross(x);
+    f.sensor.R.row(2) = z;
+    f.sensor.t = -f.sensor.R * C;
+    std::vector<float> depth(f.size());
+    for (int r = 0; r < f.height; ++r)
+      for (int c = 0; c < f.width; ++c)
+        depth[r * f.width + c] = float(1.2 + 0.03 * c + 0.05 * std::sin(0.7 * r) + (c > 22 ? 0.5 : 0.0));
+    depth[5 * f.width + 7] = 0;  // a hole
+    fill_perspective_samples(f, depth, false);
+    f.confidence.resize(f.size());
+    f.colour.resize(f.size());
+    for (std::size_t i = 0; i < f.size(); ++i) {
+      f.confidence[i] = float(0.5 + 0.5 * std::cos(0.1 * double(i)));
+      f.colour[i] = {std::uint8_t(i % 256), std::uint8_t((7 * i) % 256), std::uint8_t((13 * i) % 256)};
+    }
+    const auto tris = triangulate(f, {});
+    const RootCube root{Eigen::Vector3d(-1, -1, 0), 3.3};
+    for (double gamma : {2.0, 6.0}) {
+      IntegrateOptions opt;
+      opt.gamma = gamma;
+      opt.coarser_levels = 3;
+      BrickMap prisms(2), projective(3);
+      const IntegrateStats a = integrate_frame_prisms(f, tris, root, opt, prisms);
+      IntegrateStats b;
+      ASSERT_TRUE(integrate_frame_projective(f, tris, root, opt, projective, &b));
+      EXPECT_EQ(a.triangles, b.triangles);
+      EXPECT_EQ(a.contributions, b.contributions);
+      ASSERT_GT(a.contributions, 1000u);
+      std::size_t compared = 0, levels = 0;
+      std::set<int> seen_levels;
+      for (Brick* br : prisms.bricks())
+        br->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+          const VoxelData* w = projective.find(k);
+          ASSERT_NE(w, nullptr) << "level " << k.level() << " voxel " << k.x() << "," << k.y() << "," << k.z();
+          EXPECT_EQ(v.distance, w->distance);
+          EXPECT_EQ(v.weight, w->weight);
+          for (int c = 0; c < 3; ++c) EXPECT_EQ(v.colour_fixed[c], w->colour_fixed[c]);
+          EXPECT_EQ(v.colour_share, w->colour_share);
+          seen_levels.insert(k.level());
+          ++compared;
+        });
+      levels = seen_levels.size();
+      EXPECT_EQ(compared, projective.voxel_count());
+      EXPECT_GE(levels, 4u);
+    }
   }
 }
 
