@@ -86,6 +86,10 @@ struct Quad {
   // Per slot: the triangle's shape code (QuadShapes), plus kUsable once it can own voxels.
   std::uint8_t shape[2] = {0, 0};
   static constexpr std::uint8_t kUsable = 64;
+  // kSplit if the quad is split along a diagonal into two usable triangles; then bits 0-1 hold
+  // the diagonal's edge index in the first triangle's shape, and kPositive its side of it.
+  std::uint8_t split = 0;
+  static constexpr std::uint8_t kSplit = 8, kPositive = 4;
 };
 
 // floor() without a libm call (baseline x86-64 has no rounding instruction); |x| < 2^31.
@@ -169,6 +173,27 @@ struct Prepared {
   IntegrateStats stats;  // triangles inserted, per level
 };
 
+// The corners of a quad triangle's shape code, one bit each.
+unsigned corners_of(std::uint8_t code) {
+  unsigned m = 0;
+  for (int k = 0; k < 3; ++k) m |= 1u << ((code >> (2 * k)) & 3);
+  return m;
+}
+
+// Quad::split for a quad whose triangles' usability is known.
+std::uint8_t split_of(const Quad& qd, const QuadShapes& shapes) {
+  if (!(qd.shape[0] & qd.shape[1] & Quad::kUsable)) return 0;
+  const std::uint8_t code = qd.shape[0] & 63;
+  const unsigned a = corners_of(code), b = corners_of(qd.shape[1] & 63), shared = a & b;
+  if ((a | b) != 15 || (shared != 9 && shared != 6)) return 0;  // not halves of the quad
+  for (int e = 0; e < 3; ++e) {  // edge e joins vertices e + 1 and e + 2
+    const unsigned ends = 1u << ((code >> (2 * ((e + 1) % 3))) & 3) | 1u << ((code >> (2 * ((e + 2) % 3))) & 3);
+    if (ends == shared)
+      return std::uint8_t(Quad::kSplit | e | (shapes.shape[code].positive[e] ? Quad::kPositive : 0));
+  }
+  return 0;
+}
+
 // Pixel quad -> its triangles (two slots); false if any triangle is not within one quad, or any
 // sample is off its pixel centre (the frame then goes to the prism path).
 // With `region_box`, only the tiles whose triangles can reach that box get triangles and bounds
@@ -215,13 +240,8 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       qd.tri[1] = std::int32_t(t);
       qd.shape[1] = shape;
       // Each triangle's corner that the other lacks (its vertex 0 if none), from the shapes.
-      auto corners = [](std::uint8_t code) {
-        unsigned m = 0;
-        for (int k = 0; k < 3; ++k) m |= 1u << ((code >> (2 * k)) & 3);
-        return m;
-      };
       auto lone = [&](std::uint8_t a, std::uint8_t b) {
-        const unsigned only = corners(a) & ~corners(b);
+        const unsigned only = corners_of(a) & ~corners_of(b);
         return only != 0 ? std::countr_zero(only) : int(a & 3);
       };
       const int a = lone(qd.shape[0], shape), b = lone(shape, qd.shape[0]);
@@ -314,6 +334,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
         g.ok = facing_normal(sensor, P, &g.normal);
         if (g.ok) qd.shape[slot] |= Quad::kUsable;
       }
+      qd.split = split_of(qd, p.shapes);
     }
   });
 
@@ -582,6 +603,55 @@ class RowPrefilter {
   double slack_;
 };
 
+// The range of t (cells along a column) that an item's slab leaves to column ic of a row: the
+// highest of the lower bounds and the lowest of the upper ones, each alpha + ic beta (alpha per
+// row, beta per item). Rounding moves a bound by some 1e-13 cells, far inside the planes' margins
+// (1e-3 of a cell or a pixel), so the order of the sums is free and the planes go two to a lane.
+class ColumnBounds {
+ public:
+  // The planes bounding t below (ma > 0) or above (ma < 0); none of `cp` may be parallel.
+  void set_item(const ColumnPlane cp[8], const int lower[8], int n_lower, const int upper[8], int n_upper) {
+    n_[0] = n_lower, n_[1] = n_upper;
+    for (int j = 0; j < n_lower; ++j) plane_[0][j] = lower[j], beta_[0][j] = -cp[lower[j]].vc * cp[lower[j]].inv_ma_h;
+    for (int j = 0; j < n_upper; ++j) plane_[1][j] = upper[j], beta_[1][j] = -cp[upper[j]].vc * cp[upper[j]].inv_ma_h;
+    for (int side = 0; side < 2; ++side) {
+      const double none = side == 0 ? -kInf : kInf;  // no bound: pads a pair
+      for (int j = n_[side]; j < 8; ++j) plane_[side][j] = -1, alpha_[side][j] = none, beta_[side][j] = 0;
+    }
+  }
+  // Each plane's share of the row, row_value = v0 + ib vb.
+  void set_row(const ColumnPlane cp[8], const double row_value[8]) {
+    for (int side = 0; side < 2; ++side)
+      for (int j = 0; j < n_[side]; ++j)
+        alpha_[side][j] = -row_value[plane_[side][j]] * cp[plane_[side][j]].inv_ma_h;
+  }
+  // [*tmin, *tmax] for column ic.
+  void range(double ic, double* tmin, double* tmax) const {
+#if defined(__SSE2__) && defined(__x86_64__)
+    const __m128d icv = _mm_set1_pd(ic);
+    __m128d lo = _mm_set1_pd(-kInf), hi = _mm_set1_pd(kInf);
+    for (int j = 0; j < n_[0]; j += 2)
+      lo = _mm_max_pd(lo, _mm_add_pd(_mm_load_pd(alpha_[0] + j), _mm_mul_pd(icv, _mm_load_pd(beta_[0] + j))));
+    for (int j = 0; j < n_[1]; j += 2)
+      hi = _mm_min_pd(hi, _mm_add_pd(_mm_load_pd(alpha_[1] + j), _mm_mul_pd(icv, _mm_load_pd(beta_[1] + j))));
+    *tmin = _mm_cvtsd_f64(_mm_max_sd(lo, _mm_unpackhi_pd(lo, lo)));
+    *tmax = _mm_cvtsd_f64(_mm_min_sd(hi, _mm_unpackhi_pd(hi, hi)));
+#else
+    double lo = -kInf, hi = kInf;
+    for (int j = 0; j < n_[0]; ++j) lo = std::max(lo, alpha_[0][j] + ic * beta_[0][j]);
+    for (int j = 0; j < n_[1]; ++j) hi = std::min(hi, alpha_[1][j] + ic * beta_[1][j]);
+    *tmin = lo, *tmax = hi;
+#endif
+  }
+
+ private:
+  static constexpr double kInf = std::numeric_limits<double>::infinity();
+  alignas(16) double alpha_[2][8];
+  alignas(16) double beta_[2][8];
+  int plane_[2][8];
+  int n_[2] = {0, 0};
+};
+
 // A candidate voxel of a lattice row on its way through the kernel's phases.
 struct Candidate {
   Vector3d X;                     // its centre
@@ -826,6 +896,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           else
             upper[n_upper++] = k;
         }
+        ColumnBounds bounds;
+        bounds.set_item(cp, lower, n_lower, upper, n_upper);
         // Blocks of this level: 2^log voxels per axis, x fastest (VoxelTable); phase 4 below
         // finds a voxel in its block by these offsets.
         const int log = block_log(level, brick_level);
@@ -836,6 +908,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           if (!prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
           double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
           for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
+          bounds.set_row(cp, row_value);
           // The row's candidates go through the kernel in phases, each a loop over all of them:
           // projection, owner, sample, voxel, write. A candidate's work is one long chain of dependent
           // steps (a division, a floor, the quad, the shape, the owner's record, a square root,
@@ -849,19 +922,12 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             base[ax] = root.min[ax];
             base[bx] = root.min[bx] + h * double(ib);
             base[cx] = root.min[cx] + h * double(ic);
-            double tmin = -std::numeric_limits<double>::infinity(), tmax = -tmin;  // cells along the column
             bool empty = false;
             for (int j = 0; j < n_parallel && !empty; ++j)
               empty = row_value[parallel[j]] + double(ic) * cp[parallel[j]].vc < 0;
             if (empty) continue;
-            for (int j = 0; j < n_lower; ++j) {
-              const ColumnPlane& c = cp[lower[j]];
-              tmin = std::max(tmin, -(row_value[lower[j]] + double(ic) * c.vc) * c.inv_ma_h);
-            }
-            for (int j = 0; j < n_upper; ++j) {
-              const ColumnPlane& c = cp[upper[j]];
-              tmax = std::min(tmax, -(row_value[upper[j]] + double(ic) * c.vc) * c.inv_ma_h);
-            }
+            double tmin, tmax;  // cells along the column
+            bounds.range(double(ic), &tmin, &tmax);
             if (tmin > tmax) continue;
             tmin = std::max(tmin, double(a0 - 1));  // finite before the integer casts
             tmax = std::min(tmax, double(a1 + 1));
@@ -907,6 +973,21 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               return try_triangle(qd, first, u, v) || try_triangle(qd, 1 - first, u, v);
             };
             const Quad& here = quad[std::size_t(row) * QW + col];
+            if ((here.split & Quad::kSplit) && U > 0.5 && V > 0.5) {
+              // Off the quad's left and top borders, q lies strictly inside both triangles' quad
+              // sides, so the side of the shared diagonal alone picks the owner (the two evaluate
+              // it to the same bits, each owning one side of it) and its other two edge tests pass.
+              const Ownership& first = shapes.shape[here.shape[0] & 63];
+              const double diagonal = first.edge_local(here.split & 3, U, V);
+              const int slot = (diagonal >= 0) == bool(here.split & Quad::kPositive) ? 0 : 1;
+              const Ownership& s = shapes.shape[here.shape[slot] & 63];
+              for (int e = 0; e < 3; ++e) cand.E[e] = s.edge_local(e, U, V);
+              cand.owner = here.tri[slot];
+              cand.shape = &s;
+              __builtin_prefetch(&tris[cand.owner]);
+              batch.owned[owned++] = k;
+              continue;
+            }
             const bool guess = (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0;
             if (!try_quad(0, 0, guess)) {
               const bool left = U == 0.5, top = V == 0.5;
