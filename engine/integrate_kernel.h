@@ -185,24 +185,30 @@ inline std::uint8_t colour_byte(double v) {
   return std::uint8_t(i + (v - double(i) >= 0.5 ? 1 : 0));
 }
 
-// The colour at barycentric coordinates `bary` of vertex colours c[0..2], each channel
-// colour_byte((bary0 c0 + bary1 c1) + bary2 c2): the reference for interpolate_colour.
-inline void interpolate_colour_scalar(const double bary[3], const Rgb8* const c[3],
-                                      std::uint8_t out[3]) {
-  for (int k = 0; k < 3; ++k) out[k] = colour_byte(bary[0] * (*c[0])[k] + bary[1] * (*c[1])[k] + bary[2] * (*c[2])[k]);
+// A vertex colour as one word, c0 | c1 << 8 | c2 << 16: the voxel-centric path packs a frame's
+// colours once, so that a contribution loads each vertex's colour once rather than byte by byte.
+inline std::uint32_t packed_colour(const Rgb8& c) {
+  return std::uint32_t(c[0]) | (std::uint32_t(c[1]) << 8) | (std::uint32_t(c[2]) << 16);
+}
+
+// The colour at barycentric coordinates `bary` of vertex colours c[0..2] (packed_colour), each
+// channel colour_byte((bary0 c0 + bary1 c1) + bary2 c2): the reference for interpolate_colour.
+inline void interpolate_colour_scalar(const double bary[3], const std::uint32_t c[3], std::uint8_t out[3]) {
+  for (int k = 0; k < 3; ++k) {
+    const auto channel = [&](int j) { return double((c[j] >> (8 * k)) & 255); };
+    out[k] = colour_byte(bary[0] * channel(0) + bary[1] * channel(1) + bary[2] * channel(2));
+  }
 }
 
 #if defined(__SSE2__) && defined(__x86_64__)
 // Channels 0 and 1 in one register, 2 in another: the same products and sums, lane by lane, as
 // interpolate_colour_scalar (so the same bits), without the scalar code's six branches per
 // contribution (the run's branches 0.878x, bench/README.md session 32).
-inline void interpolate_colour(const double bary[3], const Rgb8* const c[3], std::uint8_t out[3]) {
+inline void interpolate_colour(const double bary[3], const std::uint32_t c[3], std::uint8_t out[3]) {
   const __m128i zero = _mm_setzero_si128();
   __m128d lo = _mm_setzero_pd(), hi = _mm_setzero_pd();
   for (int j = 0; j < 3; ++j) {
-    const Rgb8& cj = *c[j];
-    const int bytes = int(cj[0]) | (int(cj[1]) << 8) | (int(cj[2]) << 16);
-    const __m128i i32 = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(bytes), zero), zero);
+    const __m128i i32 = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(int(c[j])), zero), zero);
     const __m128d b = _mm_set1_pd(bary[j]);
     const __m128d plo = _mm_mul_pd(b, _mm_cvtepi32_pd(i32)), phi = _mm_mul_pd(b, _mm_cvtepi32_pd(_mm_srli_si128(i32, 8)));
     lo = j == 0 ? plo : _mm_add_pd(lo, plo);
@@ -222,7 +228,7 @@ inline void interpolate_colour(const double bary[3], const Rgb8* const c[3], std
   out[2] = std::uint8_t(_mm_cvtsi128_si32(b));
 }
 #else
-inline void interpolate_colour(const double bary[3], const Rgb8* const c[3], std::uint8_t out[3]) {
+inline void interpolate_colour(const double bary[3], const std::uint32_t c[3], std::uint8_t out[3]) {
   interpolate_colour_scalar(bary, c, out);
 }
 #endif
@@ -235,8 +241,10 @@ struct VoxelSample {
   std::uint8_t colour[3];
   bool has_colour;
 };
+// `packed`, if given, holds the frame's colours as packed_colour words.
 inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Ownership& own, const double E[3],
-                         double plane, double cosine, double ramp, const IntegrateOptions& options, VoxelSample* out) {
+                         double plane, double cosine, double ramp, const IntegrateOptions& options, VoxelSample* out,
+                         const std::uint32_t* packed = nullptr) {
   if (!(-cosine >= options.min_cosine)) return false;  // cosine < 0: the normal faces the sensor
   const double distance = plane / cosine;  // > 0: in front of the surface
   if (distance < 0) ramp *= options.behind;  // the ramp behind the surface may be shorter
@@ -252,7 +260,9 @@ inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], co
   out->weight = float(weight);
   out->has_colour = !frame.colour.empty();
   if (out->has_colour) {
-    const Rgb8* const c[3] = {&frame.colour[idx[0]], &frame.colour[idx[1]], &frame.colour[idx[2]]};
+    const std::uint32_t c[3] = {packed ? packed[idx[0]] : packed_colour(frame.colour[idx[0]]),
+                                packed ? packed[idx[1]] : packed_colour(frame.colour[idx[1]]),
+                                packed ? packed[idx[2]] : packed_colour(frame.colour[idx[2]])};
     interpolate_colour(bary, c, out->colour);
   } else {
     out->colour[0] = out->colour[1] = out->colour[2] = 0;

@@ -168,6 +168,7 @@ struct Prepared {
   // depth and unit line of sight, computed once rather than per triangle and tile.
   std::vector<double> depth;
   std::vector<Vector3d> sight;
+  std::vector<std::uint32_t> colour;  // per sample, packed_colour; empty if the frame has none
   double behind = 1;  // IntegrateOptions::behind
   double ramp[L][L];  // insertion_ramp by [level of the triangle][insertion level <= it]
   IntegrateStats stats;  // triangles inserted, per level
@@ -353,6 +354,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   const int H = frame.height;
   p.depth.resize(frame.size());
   p.sight.resize(frame.size());
+  p.colour.resize(frame.colour.empty() ? 0 : frame.size());
   tbb::parallel_for(tbb::blocked_range<int>(0, H, 16), [&](const tbb::blocked_range<int>& rows) {
     for (int r = rows.begin(); r != rows.end(); ++r)
       for (int c = 0; c < W; ++c) {
@@ -367,6 +369,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
         const Vector3d P = frame.position[i].cast<double>();
         p.depth[i] = R.row(2).dot(P) + sensor.t.z();
         p.sight[i] = (P - centre).normalized();
+        if (!p.colour.empty()) p.colour[i] = packed_colour(frame.colour[i]);
       }
   });
   for (int lt = 0; lt < L; ++lt)
@@ -824,6 +827,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
   IntegrateStats stats = p.stats;
+  const std::uint32_t* packed = p.colour.empty() ? nullptr : p.colour.data();
   // Work items (tile, level), ordered by the brick around their middle ("home"), so that items
   // run brick region by brick region.
   const Eigen::Matrix3d Rt = R.transpose();
@@ -1009,7 +1013,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             const double plane = g.normal.dot(g.P0.cast<double>() - cand.X);
             if (beyond_ramp(plane, ramp, options)) continue;
             const double cosine = sight_cosine(g.normal, cand.X - centre);
-            if (!voxel_sample(frame, g.idx, *cand.shape, cand.E, plane, cosine, ramp, options, &cand.sample)) continue;
+            if (!voxel_sample(frame, g.idx, *cand.shape, cand.E, plane, cosine, ramp, options, &cand.sample, packed))
+              continue;
             batch.sampled[sampled++] = k;
           }
           // Phase 4: the voxels, each asked for ahead of its write. A column crosses a block every

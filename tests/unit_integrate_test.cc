@@ -299,8 +299,9 @@ TEST(IntegrateKernel, ColourInLanesEqualsTheScalarReference) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> b(-0.2, 1.2);
   std::uniform_int_distribution<int> byte(0, 255);
+  using integrate_detail::packed_colour;
   auto check = [](const double bary[3], const Rgb8 c[3]) {
-    const Rgb8* const cp[3] = {&c[0], &c[1], &c[2]};
+    const std::uint32_t cp[3] = {packed_colour(c[0]), packed_colour(c[1]), packed_colour(c[2])};
     std::uint8_t lanes[3], scalar[3];
     integrate_detail::interpolate_colour(bary, cp, lanes);
     integrate_detail::interpolate_colour_scalar(bary, cp, scalar);
@@ -319,8 +320,9 @@ TEST(IntegrateKernel, ColourInLanesEqualsTheScalarReference) {
   const double cases[][3] = {{0.5, 0.5, 0}, {1, 0, 0}, {0, 0, 1}, {-0.0, 0, 0}, {nan, 0, 0}, {2, 2, 2}, {-1, 0, 0},
                              {0.25, 0.25, 0.5}, {0.49999999999999994, 0, 0}};
   for (const auto& bary : cases) check(bary, c);
+  EXPECT_EQ(packed_colour(c[0]), 0xfffe01u);  // channel k in byte k
   std::uint8_t out[3];
-  const Rgb8* const cp[3] = {&c[0], &c[1], &c[2]};
+  const std::uint32_t cp[3] = {packed_colour(c[0]), packed_colour(c[1]), packed_colour(c[2])};
   const double half[3] = {0.5, 0.5, 0};
   integrate_detail::interpolate_colour(half, cp, out);  // 1.5 -> 2, 254.5 -> 255, 255
   EXPECT_EQ(int(out[0]), 2);
