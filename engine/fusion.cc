@@ -224,9 +224,17 @@ FrameReach reach_of(const DepthFrame& f, const FusionOptions& options, const Roo
 // The reach pass's per-depth-map tables, handed from one depth map to the next: allocated afresh,
 // their page faults were half of the plan's time (7-Scenes kitchen, bench/README.md session 18).
 // A pool rather than one per thread, because a thread waiting in a depth map's inner parallel
-// loop may start another depth map.
+// loop may start another depth map. The integrating stage then takes its tables from the same
+// pool, so that they too are memory already faulted in (the plan's largest tables, kept by
+// trim(1)), not as much again freshly zeroed.
 class ScratchPool {
  public:
+  // Frees all but the `keep` largest tables.
+  void trim(std::size_t keep) {
+    std::lock_guard lock(mutex_);
+    std::sort(free_.begin(), free_.end(), [](const auto& a, const auto& b) { return a->bytes() > b->bytes(); });
+    if (free_.size() > keep) free_.resize(keep);
+  }
   std::unique_ptr<IntegrateScratch> take() {
     std::lock_guard lock(mutex_);
     if (free_.empty()) return std::make_unique<IntegrateScratch>();
@@ -259,12 +267,11 @@ struct Reaches {
 
 template <typename LoadFrame>
 Reaches gather_reaches(std::size_t n, LoadFrame&& load, const FusionOptions& options, const RootCube& root,
-                       int brick_level, const BrickBox* region, const ProgressFn& progress) {
+                       int brick_level, const BrickBox* region, const ProgressFn& progress, ScratchPool& scratches) {
   Reaches out;
   out.bricks.resize(n);
   std::size_t cells_unique = 0, planned = 0;
   std::mutex mutex;
-  ScratchPool scratches;
   tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
     std::unique_ptr<IntegrateScratch> scratch = scratches.take();
     FrameReach r = reach_of(load(i), options, root, brick_level, scratch.get());
@@ -318,10 +325,11 @@ std::vector<std::vector<std::size_t>> plan_sweep(std::size_t from, std::size_t t
                                                  const FusionOptions& options, const RootCube& root, const BrickMap& map,
                                                  const ProgressFn& progress_fn, IntegrationProgress& progress,
                                                  FusionStats& stats, const BrickBox* region,
-                                                 std::vector<BrickBox>* reach_boxes) {
+                                                 std::vector<BrickBox>* reach_boxes, ScratchPool& scratches) {
   const int brick_level = map.brick_level();
   const Reaches reach = gather_reaches(
-      to - from, [&](std::size_t i) { return load_frame(from + i); }, options, root, brick_level, region, progress_fn);
+      to - from, [&](std::size_t i) { return load_frame(from + i); }, options, root, brick_level, region, progress_fn,
+      scratches);
   if (!progress.sweeping()) {
     // 70% of the limit per tile: the estimate is within about 25% on the scenes measured, and the
     // depth maps in flight need room (the cache spills if a tile outgrows it anyway).
@@ -363,6 +371,7 @@ FusionPlan plan_fusion(const FrameSource& source, const FusionOptions& options, 
 
   // Each depth map's reach; the field's bytes per brick estimated from the surface cells (the
   // work of every later stage grows with them).
+  ScratchPool scratches;
   const Reaches reach = gather_reaches(
       plan.frames.size(),
       [&](std::size_t i) {
@@ -370,7 +379,7 @@ FusionPlan plan_fusion(const FrameSource& source, const FusionOptions& options, 
         clip_to_box(f, clip);
         return f;
       },
-      options, plan.root, plan.brick_level, nullptr, progress);
+      options, plan.root, plan.brick_level, nullptr, progress, scratches);
   const auto estimate = estimate_brick_bytes(reach.cells, plan.brick_level, options.integrate, {}, reach.touched());
   plan.tiles = split_tiles(estimate, plan.brick_level, n_tiles);
   plan.work.assign(plan.tiles.size(), 0.0);
@@ -478,7 +487,8 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
     return item.frame.memory_bytes() + item.triangles.capacity() * sizeof(FrameTriangle);
   };
   IntegrateStats integ;
-  IntegrateScratch tables;  // the integrating stage's tables, reused depth map after depth map
+  ScratchPool scratches;  // the plan's tables, and the integrating stage's
+  std::unique_ptr<IntegrateScratch> tables;  // the integrating stage's, reused depth map after depth map
   const std::size_t tokens = std::size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
   const std::atomic<bool>* stop = hooks.follow ? nullptr : hooks.stop;
   bool stopped = false;
@@ -497,15 +507,18 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
       } else {
         const auto plan_start = Clock::now();
         std::vector<BrickBox> reach_boxes;
+        if (tables) scratches.give_back(std::move(tables));
         tile_frames = plan_sweep(
             from, to, [&](std::size_t i) {
               LateSamples late;
               return load_frame(i, &late);
             },
-            options, root, map, hooks.progress, progress, stats, hooks.region, &reach_boxes);
+            options, root, map, hooks.progress, progress, stats, hooks.region, &reach_boxes, scratches);
+        scratches.trim(1);
         if (journal) journal->reached(from, reach_boxes);
         plan_seconds += std::chrono::duration<double>(Clock::now() - plan_start).count();
       }
+      if (!tables) tables = scratches.take();
       progress.sweep_end = to;
       stats.tiles = progress.tiles.size();
       std::size_t total_steps = 0;
@@ -552,7 +565,7 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
                   item_bytes_max = std::max(item_bytes_max, item_bytes(*item));
                   map.set_reserve((tokens + 1) * item_bytes_max);
                   IntegrateStats s =
-                      integrate_frame(item->frame, item->triangles, root, options.integrate, map, region, &tables);
+                      integrate_frame(item->frame, item->triangles, root, options.integrate, map, region, tables.get());
                   char& first_time = counted[item->index - from];
                   if (first_time == 0) {
                     outside += item->late.outside;
@@ -608,6 +621,8 @@ Mesh fuse(const FrameSource& source, const FusionOptions& options, const FusionH
                       std::to_string(progress.tiles.size()) + " (" + std::to_string(progress.integrated) + " of " +
                       std::to_string(frames.size()) + " depth maps in every tile)");
   }
+  tables.reset();  // extraction has no use for them
+  scratches.trim(0);
   stats.frame_reads = reads.load();
   for (const auto& [c, bytes] : map.field_bytes()) stats.field_bytes += bytes;
   stats.depth_maps = frames.size();

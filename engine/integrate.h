@@ -60,6 +60,7 @@ class IntegrateScratch {
   ~IntegrateScratch();
   IntegrateScratch(const IntegrateScratch&) = delete;
   IntegrateScratch& operator=(const IntegrateScratch&) = delete;
+  std::size_t bytes() const;  // the tables' capacity
   struct Tables;
   std::unique_ptr<Tables> tables;
 };

@@ -810,6 +810,13 @@ struct IntegrateScratch::Tables {
 };
 IntegrateScratch::IntegrateScratch() : tables(std::make_unique<Tables>()) {}
 IntegrateScratch::~IntegrateScratch() = default;
+std::size_t IntegrateScratch::bytes() const {
+  const Prepared& p = tables->prepared;
+  return p.quad.capacity() * sizeof(Quad) + p.tris.capacity() * sizeof(GridTriangle) +
+         p.tile_levels.capacity() * sizeof(TileLevel) + p.tile_normal.capacity() * sizeof(Vector3d) +
+         p.depth.capacity() * sizeof(double) + p.sight.capacity() * sizeof(Vector3d) +
+         p.colour.capacity() * sizeof(std::uint32_t);
+}
 
 bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
                                 const RootCube& root, const IntegrateOptions& options, BrickMap& map,
