@@ -5,6 +5,9 @@
 #include <lz4.h>
 #include <unistd.h>
 #include <xxhash.h>
+#if defined(__SSE2__) && defined(__x86_64__)
+#include <xmmintrin.h>
+#endif
 
 #include <algorithm>
 #include <bit>
@@ -290,6 +293,38 @@ std::size_t TileBuffers::retained_bytes() const {
   return retained_;
 }
 
+namespace {
+
+// A block's presence mask (bit i: voxel i's weight is not 0, so live or erased) and its count.
+std::uint64_t presence_mask(const VoxelData* v, std::size_t n, std::size_t* present) {
+  std::uint64_t mask = 0;
+  std::size_t count = 0, i = 0;
+#if defined(__SSE2__) && defined(__x86_64__)
+  // Four voxels' weights gathered into one register and compared at once; the count of a 4-bit
+  // group read from a table of nibbles (baseline x86-64 has no popcount instruction).
+  static_assert(sizeof(VoxelData) == 16 && offsetof(VoxelData, weight) == 4, "weight is lane 1 of a record");
+  constexpr std::uint64_t kBitsIn = 0x4332322132212110;  // nibble k: the bits set in k
+  for (; i + 4 <= n; i += 4) {
+    const float* f = reinterpret_cast<const float*>(v + i);
+    const __m128 ab = _mm_shuffle_ps(_mm_loadu_ps(f), _mm_loadu_ps(f + 4), _MM_SHUFFLE(1, 1, 1, 1));
+    const __m128 cd = _mm_shuffle_ps(_mm_loadu_ps(f + 8), _mm_loadu_ps(f + 12), _MM_SHUFFLE(1, 1, 1, 1));
+    const __m128 weights = _mm_shuffle_ps(ab, cd, _MM_SHUFFLE(2, 0, 2, 0));
+    const unsigned bits = unsigned(_mm_movemask_ps(_mm_cmpneq_ps(weights, _mm_setzero_ps())));
+    mask |= std::uint64_t(bits) << i;
+    count += (kBitsIn >> (4 * bits)) & 15;
+  }
+#endif
+  for (; i < n; ++i) {
+    const bool in = v[i].weight != 0;
+    mask |= std::uint64_t(in) << i;
+    count += in;
+  }
+  *present = count;
+  return mask;
+}
+
+}  // namespace
+
 std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels, bool durable,
                          TileBuffers* buffers) {
   TileBuffers unpooled(0);  // keeps nothing: pages mapped for this tile alone
@@ -322,13 +357,8 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
     if (::lseek(fd, off_t(kHeaderBytes), SEEK_SET) < 0) throw_write_error(tmp.string(), "cannot write tile", errno);
     for (const BlockView& b : blocks) {
       const std::size_t n = std::size_t{1} << (3 * b.log);
-      std::uint64_t mask = 0;
-      std::size_t present = 0;  // counted here: baseline x86-64 has no popcount instruction
-      for (std::size_t i = 0; i < n; ++i) {
-        const bool in = b.data[i].weight != 0;
-        mask |= std::uint64_t(in) << i;
-        present += in;
-      }
+      std::size_t present = 0;
+      const std::uint64_t mask = presence_mask(b.data, n, &present);
       const std::size_t bytes = 16 + present * kRecord;
       unsigned char* p = chunks.reserve(bytes);
       put64(p, b.origin.bits);

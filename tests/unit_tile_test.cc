@@ -413,6 +413,8 @@ TEST(Tile, PresenceMaskKeepsErasedVoxelsAndRefusesImpossibleMasks) {
   t.find_or_insert(live) = VoxelData{0.5f, 2.0f, {256, 512, 768}, 65535};
   t.find_or_insert(erased).weight = -1.0f;
   t.find_or_insert(absent).distance = 7.0f;  // weight 0: absent, whatever else it holds
+  const VoxelKey negative_zero = VoxelKey::make(9, 129, 6, 141);
+  t.find_or_insert(negative_zero).weight = -0.0f;  // 0 too
   write_tile(dir / "t.tile", {2, 0, 2}, t);
   VoxelTable back(3);
   read_tile(dir / "t.tile", back);
@@ -421,6 +423,7 @@ TEST(Tile, PresenceMaskKeepsErasedVoxelsAndRefusesImpossibleMasks) {
   EXPECT_EQ(back.find(live)->colour_fixed[2], 768);
   EXPECT_EQ(back.find(erased)->weight, -1.0f);
   EXPECT_EQ(back.find(absent), nullptr);
+  EXPECT_EQ(back.find(negative_zero), nullptr);
   EXPECT_EQ(back.find_or_insert(absent).distance, 0.0f);
 
   // One 4^3 block of level 9 at origin (128, 4, 140): voxel 2 + 4 * 1 + 16 * 0 = 6 is (130, 5, 140).
