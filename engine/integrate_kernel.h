@@ -59,17 +59,12 @@ struct Ownership {
 
   // The edge function of edge e at p: cross2(direction, p - start).
   double edge(int e, const Eigen::Vector2d& p) const { return dx[e] * (p.y() - ay[e]) - dy[e] * (p.x() - ax[e]); }
-  // The same for the triangle moved by (col, row), whole pixels: for a triangle of pixel centres
-  // set up in the quad at (0, 0) the moved starts col + ax, row + ay are exact, so this gives the
-  // bits of the moved triangle's own edge(), and one Ownership serves every quad of its shape.
-  double edge(int e, const Eigen::Vector2d& p, double col, double row) const {
-    return dx[e] * (p.y() - (row + ay[e])) - dy[e] * (p.x() - (col + ax[e]));
-  }
-  // The same in the moved quad's own coordinates U = p.x - col, V = p.y - row, for such a shape
-  // (starts 0.5 or 1.5, directions -1, 0 or 1) and p at least half a pixel right of and below
-  // col, row and less than 2.5 beyond: U, V, V - ay and p.y - (row + ay) are then all exact
-  // (multiples of p's ulp, below 2 in size), so this gives edge()'s bits with two additions
-  // fewer per edge (the owner test runs for every candidate voxel).
+  // The same for a triangle of pixel centres set up in the quad at (0, 0) (starts 0.5 or 1.5,
+  // directions -1, 0 or 1) and moved by whole pixels (col, row), at p given in the moved quad's
+  // coordinates U = p.x - col, V = p.y - row. For p at least half a pixel right of and below
+  // (col, row) and less than 2.5 beyond, U, V, V - ay and p.y - (row + ay) are all exact
+  // (multiples of p's ulp, below 2 in size), so this gives the bits of the moved triangle's own
+  // edge(), and one Ownership serves every quad of its shape.
   double edge_local(int e, double U, double V) const { return dx[e] * (V - ay[e]) - dy[e] * (U - ax[e]); }
   // Sets the fields; false if the triangle is degenerate in the sensor plane.
   bool init(const Eigen::Vector2f q[3], const std::uint32_t idx[3]) {
@@ -92,11 +87,7 @@ struct Ownership {
   bool owns(const Eigen::Vector2d& p, double E[3]) const {
     return owns_by([&](int e) { return edge(e, p); }, E);
   }
-  // owns() for the triangle moved by (col, row), whole pixels (see edge()).
-  bool owns(const Eigen::Vector2d& p, double col, double row, double E[3]) const {
-    return owns_by([&](int e) { return edge(e, p, col, row); }, E);
-  }
-  // owns() in the moved quad's coordinates (see edge_local()).
+  // owns() for the triangle moved by whole pixels, in the moved quad's coordinates (edge_local()).
   bool owns_local(double U, double V, double E[3]) const {
     return owns_by([&](int e) { return edge_local(e, U, V); }, E);
   }

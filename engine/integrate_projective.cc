@@ -952,12 +952,13 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             // Phase 1: project; keep the voxels whose quad is this tile's.
             if (i1 >= i0) n = project_column(sensor, terms, base, ax, h, i0, i1, ic, ColumnTile{c0, c1, r0, r1}, batch, n);
           }
-          // Phase 2: the owner, one of the quad's triangles (the likelier first), or, on the
-          // quad's left or top border, one of the neighbouring quads' (edge functions give a
-          // shared edge to one side only). Trying the previous voxel's owner first, as this once
-          // did, saves nothing: it owns the next only a third of the time (a step along a column
-          // moves the projection up to 0.8 pixel), and the extra test and its unpredictable
-          // branch cost more (bench/README.md, session 31).
+          // Phase 2: the owner, one of the quad's triangles (chosen by the diagonal's side if the
+          // quad is split in two, else the likelier tried first), or, on the quad's left or top
+          // border, one of the neighbouring quads' (edge functions give a shared edge to one side
+          // only). Trying the previous voxel's owner first, as this once did, saves nothing: it
+          // owns the next only a third of the time (a step along a column moves the projection up
+          // to 0.8 pixel), and the extra test and its unpredictable branch cost more
+          // (bench/README.md, session 31).
           std::size_t owned = 0;
           for (std::uint32_t k = 0; k < n; ++k) {
             Candidate& cand = batch.cand[k];
