@@ -251,9 +251,8 @@ inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], co
   out->weight = float(weight);
   out->has_colour = !frame.colour.empty();
   if (out->has_colour) {
-    const std::uint32_t c[3] = {packed ? packed[idx[0]] : packed_colour(frame.colour[idx[0]]),
-                                packed ? packed[idx[1]] : packed_colour(frame.colour[idx[1]]),
-                                packed ? packed[idx[2]] : packed_colour(frame.colour[idx[2]])};
+    const auto colour_of = [&](std::uint32_t i) { return packed ? packed[i] : packed_colour(frame.colour[i]); };
+    const std::uint32_t c[3] = {colour_of(idx[0]), colour_of(idx[1]), colour_of(idx[2])};
     interpolate_colour(bary, c, out->colour);
   } else {
     out->colour[0] = out->colour[1] = out->colour[2] = 0;

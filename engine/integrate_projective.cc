@@ -996,12 +996,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               for (int e = 0; e < 3; ++e) cand.E[e] = s.edge_local(e, U, V);
               cand.owner = here.tri[slot];
               cand.shape = &s;
-              __builtin_prefetch(&tris[cand.owner]);
-              batch.owned[owned++] = k;
-              continue;
-            }
-            const bool guess = (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0;
-            if (!try_quad(0, 0, guess)) {
+            } else if (!try_quad(0, 0, (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0)) {
               const bool left = U == 0.5, top = V == 0.5;
               if (!((left && try_quad(1, 0, true)) || (top && try_quad(0, 1, true)) ||
                     (left && top && try_quad(1, 1, true))))
