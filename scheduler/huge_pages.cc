@@ -14,6 +14,14 @@ namespace {
 
 constexpr std::string_view kTunable = "glibc.malloc.hugetlb";
 
+// How each heap grows and shrinks (see huge_pages.h): 32 MiB at a time, kept until 64 MiB lie
+// free at its top, and allocations below 32 MiB from the heap rather than fresh mappings.
+constexpr std::string_view kHeapTunables[][2] = {
+    {"glibc.malloc.top_pad", "33554432"},
+    {"glibc.malloc.mmap_threshold", "33554432"},
+    {"glibc.malloc.trim_threshold", "67108864"},
+};
+
 // "2.36" -> true for 2.35 and later.
 bool has_hugetlb_tunable(std::string_view version) {
   unsigned major = 0, minor = 0;
@@ -36,6 +44,13 @@ std::optional<std::string> huge_page_tunables(const char* tunables, std::string_
   if (!value.empty()) value += ':';
   value += kTunable;
   value += "=1";
+  for (const auto& [name, setting] : kHeapTunables) {
+    if (current.find(name) != std::string_view::npos) continue;  // the user's
+    value += ':';
+    value += name;
+    value += '=';
+    value += setting;
+  }
   return value;
 }
 

@@ -5,6 +5,15 @@
 // went to page faults (bench/README.md, session 19). glibc's malloc asks the kernel for 2 MiB pages
 // when started with GLIBC_TUNABLES=glibc.malloc.hugetlb=1, a setting read only at start-up, so the
 // command-line program re-executes itself once with it. Allocation only: results do not change.
+//
+// That alone gives 2 MiB pages to the main thread's heap only. TBB's worker threads allocate from
+// heaps of their own, which glibc grows by as little as each request needs, so a 2 MiB range is
+// never faulted whole and they took 4 KiB faults (igea at 2 threads: 37 k faults, against 15 k
+// with the settings below). The same re-execution therefore also sets how every heap grows: by
+// 32 MiB at a time (top_pad), trimmed back only when 64 MiB lie free at its top (trim_threshold),
+// and allocations under 32 MiB served from the heap (mmap_threshold, which glibc would otherwise
+// keep at 128 KiB once top_pad is set, mapping every depth map's arrays afresh). Measured:
+// bench/README.md, session 37.
 #include <optional>
 #include <string>
 #include <string_view>
@@ -16,7 +25,7 @@ namespace sf {
 // [madvise] never": only the madvise mode needs glibc to ask; "always" gives huge pages unasked,
 // "never" not at all), `libc_version` glibc's (the tunable exists from 2.35), `tunables` the
 // current GLIBC_TUNABLES (null if unset; one that already sets glibc.malloc.hugetlb is the user's
-// choice, or this process's own re-execution, and is kept).
+// choice, or this process's own re-execution, and is kept, as is any heap tunable it sets).
 std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
                                               std::string_view libc_version);
 

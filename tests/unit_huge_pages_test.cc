@@ -4,8 +4,15 @@
 
 using sf::huge_page_tunables;
 
+namespace {
+// The heap tunables that come with glibc.malloc.hugetlb=1 (scheduler/huge_pages.h).
+const std::string kPad = ":glibc.malloc.top_pad=33554432", kMmap = ":glibc.malloc.mmap_threshold=33554432",
+                  kTrim = ":glibc.malloc.trim_threshold=67108864";
+const std::string kAll = "glibc.malloc.hugetlb=1" + kPad + kMmap + kTrim;
+}  // namespace
+
 TEST(HugePages, AsksGlibcOnlyWhereTheKernelWaitsToBeAsked) {
-  EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never\n", "2.36"), "glibc.malloc.hugetlb=1");
+  EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never\n", "2.36"), kAll);
   EXPECT_EQ(huge_page_tunables(nullptr, "[always] madvise never\n", "2.36"), std::nullopt);  // given unasked
   EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]\n", "2.36"), std::nullopt);  // not at all
   EXPECT_EQ(huge_page_tunables(nullptr, "", "2.36"), std::nullopt);
@@ -13,15 +20,20 @@ TEST(HugePages, AsksGlibcOnlyWhereTheKernelWaitsToBeAsked) {
 
 TEST(HugePages, NeedsAGlibcThatKnowsTheTunable) {
   EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "2.34"), std::nullopt);
-  EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "2.35"), "glibc.malloc.hugetlb=1");
-  EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "3.0"), "glibc.malloc.hugetlb=1");
+  EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "2.35"), kAll);
+  EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "3.0"), kAll);
   EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "unknown"), std::nullopt);
 }
 
 TEST(HugePages, KeepsTheUsersTunablesAndNeverLoops) {
   EXPECT_EQ(huge_page_tunables("glibc.malloc.arena_max=2", "always [madvise] never", "2.36"),
-            "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1");
-  EXPECT_EQ(huge_page_tunables("", "always [madvise] never", "2.36"), "glibc.malloc.hugetlb=1");
+            "glibc.malloc.arena_max=2:" + kAll);
+  EXPECT_EQ(huge_page_tunables("", "always [madvise] never", "2.36"), kAll);
+  // A heap tunable the user set stays theirs.
+  EXPECT_EQ(huge_page_tunables("glibc.malloc.top_pad=0", "always [madvise] never", "2.36"),
+            "glibc.malloc.top_pad=0:glibc.malloc.hugetlb=1" + kMmap + kTrim);
+  EXPECT_EQ(huge_page_tunables("glibc.malloc.trim_threshold=1:glibc.malloc.mmap_threshold=2", "always [madvise] never", "2.36"),
+            "glibc.malloc.trim_threshold=1:glibc.malloc.mmap_threshold=2:glibc.malloc.hugetlb=1" + kPad);
   // Set already, by the user (0 = no) or by the re-execution itself.
   EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0", "always [madvise] never", "2.36"), std::nullopt);
   EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=1", "always [madvise] never", "2.36"), std::nullopt);
