@@ -36,7 +36,9 @@ bool has_hugetlb_tunable(std::string_view version) {
 
 std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
                                               std::string_view libc_version) {
-  if (transparent_hugepage.find("[madvise]") == std::string_view::npos) return std::nullopt;
+  if (transparent_hugepage.find("[madvise]") == std::string_view::npos &&
+      transparent_hugepage.find("[always]") == std::string_view::npos)
+    return std::nullopt;
   if (!has_hugetlb_tunable(libc_version)) return std::nullopt;
   const std::string_view current = tunables ? tunables : "";
   if (current.find(kTunable) != std::string_view::npos) return std::nullopt;

@@ -11,9 +11,10 @@ const std::string kPad = ":glibc.malloc.top_pad=33554432", kMmap = ":glibc.mallo
 const std::string kAll = "glibc.malloc.hugetlb=1" + kPad + kMmap + kTrim;
 }  // namespace
 
-TEST(HugePages, AsksGlibcOnlyWhereTheKernelWaitsToBeAsked) {
+TEST(HugePages, SetsTheHeapsWhereverTheKernelGivesHugePages) {
   EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never\n", "2.36"), kAll);
-  EXPECT_EQ(huge_page_tunables(nullptr, "[always] madvise never\n", "2.36"), std::nullopt);  // given unasked
+  // Given unasked, but only where a heap grows over a whole 2 MiB range.
+  EXPECT_EQ(huge_page_tunables(nullptr, "[always] madvise never\n", "2.36"), kAll);
   EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]\n", "2.36"), std::nullopt);  // not at all
   EXPECT_EQ(huge_page_tunables(nullptr, "", "2.36"), std::nullopt);
 }
