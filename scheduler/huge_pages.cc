@@ -36,16 +36,16 @@ bool has_hugetlb_tunable(std::string_view version) {
 
 std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
                                               std::string_view libc_version) {
-  if (transparent_hugepage.find("[madvise]") == std::string_view::npos &&
-      transparent_hugepage.find("[always]") == std::string_view::npos)
-    return std::nullopt;
+  const bool huge = transparent_hugepage.find("[madvise]") != std::string_view::npos ||
+                    transparent_hugepage.find("[always]") != std::string_view::npos;
+  if (!huge && transparent_hugepage.find("[never]") == std::string_view::npos) return std::nullopt;
   if (!has_hugetlb_tunable(libc_version)) return std::nullopt;
   const std::string_view current = tunables ? tunables : "";
   if (current.find(kTunable) != std::string_view::npos) return std::nullopt;
   std::string value(current);
   if (!value.empty()) value += ':';
   value += kTunable;
-  value += "=1";
+  value += huge ? "=1" : "=0";  // 0: nothing to ask for, but it marks the re-execution as done
   for (const auto& [name, setting] : kHeapTunables) {
     if (current.find(name) != std::string_view::npos) continue;  // the user's
     value += ':';

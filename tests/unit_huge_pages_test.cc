@@ -11,12 +11,15 @@ const std::string kPad = ":glibc.malloc.top_pad=33554432", kMmap = ":glibc.mallo
 const std::string kAll = "glibc.malloc.hugetlb=1" + kPad + kMmap + kTrim;
 }  // namespace
 
-TEST(HugePages, SetsTheHeapsWhereverTheKernelGivesHugePages) {
+TEST(HugePages, SetsTheHeapsInEveryTransparentHugePageMode) {
   EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never\n", "2.36"), kAll);
   // Given unasked, but only where a heap grows over a whole 2 MiB range.
   EXPECT_EQ(huge_page_tunables(nullptr, "[always] madvise never\n", "2.36"), kAll);
-  EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]\n", "2.36"), std::nullopt);  // not at all
-  EXPECT_EQ(huge_page_tunables(nullptr, "", "2.36"), std::nullopt);
+  // None at all: nothing to ask glibc for (hugetlb=0 still marks the re-execution), but the heaps.
+  EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]\n", "2.36"),
+            "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim);
+  EXPECT_EQ(huge_page_tunables(nullptr, "", "2.36"), std::nullopt);  // no mode read
+  EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0", "always madvise [never]", "2.36"), std::nullopt);
 }
 
 TEST(HugePages, NeedsAGlibcThatKnowsTheTunable) {
