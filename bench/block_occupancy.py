@@ -7,19 +7,16 @@ present voxel and how full those are; then the slots (16 bytes each, all zeroed 
 made) the field holds now and would hold in 2^3 blocks. Headers, index slots and allocator chunks
 are not counted (they grow with the block count).
 Usage: bench/block_occupancy.py JOB"""
-import importlib.util
 import os
 import sqlite3
 import struct
 import sys
 
+from field_hash import raw_payload  # the tile reader (formats 4 to 6)
+
 if len(sys.argv) != 2:
     sys.exit(__doc__)
 job = sys.argv[1]
-spec = importlib.util.spec_from_file_location("field_hash", os.path.join(os.path.dirname(__file__), "field_hash.py"))
-source = open(spec.origin).read().split("\nif len(sys.argv) != 2")[0]  # the reader, not the script
-reader = {}
-exec(compile(source, spec.origin, "exec"), reader)
 brick_level = int(sqlite3.connect(os.path.join(job, "job.sqlite")).execute(
     "SELECT value FROM meta WHERE key = 'brick_level'").fetchone()[0])
 
@@ -40,7 +37,7 @@ tiles = os.path.join(job, "tiles")
 for name in os.listdir(tiles):
     if not name.endswith(".tile"):
         continue
-    payload = reader["raw_payload"](os.path.join(tiles, name))
+    payload = raw_payload(os.path.join(tiles, name))
     at = 0
     while at < len(payload):
         key, mask = struct.unpack_from("<QQ", payload, at)

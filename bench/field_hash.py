@@ -46,11 +46,16 @@ def raw_payload(path):
     return b"".join(parts)
 
 
-if len(sys.argv) != 2:
-    sys.exit(__doc__)
-lines = []
-for name in os.listdir(sys.argv[1]):
-    if name.endswith(".tile"):
-        brick = re.sub(r"\.[0-9]+\.tile$", "", name)
-        lines.append(f"{hashlib.sha256(raw_payload(os.path.join(sys.argv[1], name))).hexdigest()}  {brick}\n")
-print(hashlib.sha256("".join(sorted(lines)).encode()).hexdigest()[:16])
+def main():
+    if len(sys.argv) != 2:
+        sys.exit(__doc__)
+    lines = []
+    for name in os.listdir(sys.argv[1]):
+        if name.endswith(".tile"):
+            brick = re.sub(r"\.[0-9]+\.tile$", "", name)
+            lines.append(f"{hashlib.sha256(raw_payload(os.path.join(sys.argv[1], name))).hexdigest()}  {brick}\n")
+    print(hashlib.sha256("".join(sorted(lines)).encode()).hexdigest()[:16])
+
+
+if __name__ == "__main__":  # bench/block_occupancy.py imports raw_payload
+    main()

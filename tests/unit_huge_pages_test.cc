@@ -5,7 +5,8 @@
 using sf::huge_page_tunables;
 
 namespace {
-// The heap tunables that come with glibc.malloc.hugetlb=1 (scheduler/huge_pages.h).
+// The heap tunables that come with glibc.malloc.hugetlb=1 (or =0 where the kernel gives no huge
+// pages; scheduler/huge_pages.h).
 const std::string kPad = ":glibc.malloc.top_pad=33554432", kMmap = ":glibc.malloc.mmap_threshold=33554432",
                   kTrim = ":glibc.malloc.trim_threshold=67108864";
 const std::string kAll = "glibc.malloc.hugetlb=1" + kPad + kMmap + kTrim;
