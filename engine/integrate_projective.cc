@@ -564,22 +564,38 @@ class RowPrefilter {
     for (int i = 0; i < nl; ++i)
       for (int j = i == 0 ? 1 : 0; j < nu; ++j)
         add(upper[j].alpha - lower[i].alpha, upper[j].beta - lower[i].beta, upper[j].gamma - lower[i].gamma);
+    pad();
   }
   // Narrows [*ic0, *ic1] to the columns of row ib that may meet the slab; false if none can.
+  // floor is monotonic, so the tightest lower bound is floor of the greatest x, less one (and the
+  // tightest upper one ceil of the least, plus one): one rounding per row, made only if it can
+  // narrow (a libm call on baseline x86-64), and the bounds themselves two to a lane.
   bool clip_row(double ib, std::int64_t* ic0, std::int64_t* ic1) const {
     double lo = double(*ic0), hi = double(*ic1);
+#if defined(__SSE2__) && defined(__x86_64__)
+    const __m128d ibv = _mm_set1_pd(ib), zero = _mm_setzero_pd();
+    __m128d negative = _mm_setzero_pd();
+    for (int k = 0; k < n_row_; k += 2)
+      negative = _mm_or_pd(negative, _mm_cmplt_pd(_mm_add_pd(_mm_load_pd(row_.a + k), _mm_mul_pd(_mm_load_pd(row_.b + k), ibv)), zero));
+    if (_mm_movemask_pd(negative)) return false;
+    __m128d most = _mm_set1_pd(-kInf), least = _mm_set1_pd(kInf);
+    for (int k = 0; k < n_lo_; k += 2)
+      most = _mm_max_pd(most, _mm_mul_pd(_mm_add_pd(_mm_load_pd(lo_.a + k), _mm_mul_pd(_mm_load_pd(lo_.b + k), ibv)),
+                                         _mm_load_pd(lo_.r + k)));
+    for (int k = 0; k < n_hi_; k += 2)
+      least = _mm_min_pd(least, _mm_mul_pd(_mm_add_pd(_mm_load_pd(hi_.a + k), _mm_mul_pd(_mm_load_pd(hi_.b + k), ibv)),
+                                           _mm_load_pd(hi_.r + k)));
+    const double x_lo = _mm_cvtsd_f64(_mm_max_sd(most, _mm_unpackhi_pd(most, most)));
+    const double x_hi = _mm_cvtsd_f64(_mm_min_sd(least, _mm_unpackhi_pd(least, least)));
+#else
     for (int k = 0; k < n_row_; ++k)
-      if (row_[k].a + row_[k].b * ib < 0) return false;
-    // floor(x) - 1 > lo implies x - 1 > lo (and ceil(x) + 1 < hi implies x + 1 < hi): the rounding
-    // call, a libm call on baseline x86-64, is made only for the bounds that can narrow.
-    for (int k = 0; k < n_lo_; ++k) {
-      const double x = (lo_[k].a + lo_[k].b * ib) * lo_[k].r;
-      if (x - 1 > lo) lo = std::max(lo, std::floor(x) - 1);
-    }
-    for (int k = 0; k < n_hi_; ++k) {
-      const double x = (hi_[k].a + hi_[k].b * ib) * hi_[k].r;
-      if (x + 1 < hi) hi = std::min(hi, std::ceil(x) + 1);
-    }
+      if (row_.a[k] + row_.b[k] * ib < 0) return false;
+    double x_lo = -kInf, x_hi = kInf;
+    for (int k = 0; k < n_lo_; ++k) x_lo = std::max(x_lo, (lo_.a[k] + lo_.b[k] * ib) * lo_.r[k]);
+    for (int k = 0; k < n_hi_; ++k) x_hi = std::min(x_hi, (hi_.a[k] + hi_.b[k] * ib) * hi_.r[k]);
+#endif
+    if (x_lo - 1 > lo) lo = std::floor(x_lo) - 1;
+    if (x_hi + 1 < hi) hi = std::ceil(x_hi) + 1;
     if (lo > hi) return false;
     *ic0 = std::int64_t(lo);
     *ic1 = std::int64_t(hi);
@@ -587,21 +603,32 @@ class RowPrefilter {
   }
 
  private:
-  // a + b ib + c ic >= 0, loosened by the slack: ic >= (a + b ib) r (c > 0) or <= (c < 0), r = -1 / c.
-  struct HalfPlane {
-    double a, b, r;
+  static constexpr double kInf = std::numeric_limits<double>::infinity();
+  static constexpr int kMax = 8 + 9 * 9 + 1;  // every pair, and a pad to an even count
+  // a + b ib + c ic >= 0, loosened by the slack: ic >= (a + b ib) r (c > 0) or <= (c < 0), r = -1 / c;
+  // in columns, two to a lane.
+  struct HalfPlanes {
+    alignas(16) double a[kMax];
+    alignas(16) double b[kMax];
+    alignas(16) double r[kMax];
+    void push(int* n, double av, double bv, double rv) { a[*n] = av, b[*n] = bv, r[*n] = rv, ++*n; }
   };
   void add(double a, double b, double c) {
-    const HalfPlane g{a + slack_ * (1.0 + std::abs(a)), b, c != 0 ? -1.0 / c : 0.0};
+    const double loose = a + slack_ * (1.0 + std::abs(a)), r = c != 0 ? -1.0 / c : 0.0;
     if (c > 0)
-      lo_[n_lo_++] = g;
+      lo_.push(&n_lo_, loose, b, r);
     else if (c < 0)
-      hi_[n_hi_++] = g;
+      hi_.push(&n_hi_, loose, b, r);
     else
-      row_[n_row_++] = g;
+      row_.push(&n_row_, loose, b, r);
   }
-  static constexpr int kMax = 8 + 9 * 9;
-  HalfPlane lo_[kMax], hi_[kMax], row_[kMax];
+  // Pads each list to an even count with a bound that never binds.
+  void pad() {
+    if (n_lo_ % 2) lo_.a[n_lo_] = -kInf, lo_.b[n_lo_] = 0, lo_.r[n_lo_] = 1;
+    if (n_hi_ % 2) hi_.a[n_hi_] = kInf, hi_.b[n_hi_] = 0, hi_.r[n_hi_] = 1;
+    if (n_row_ % 2) row_.a[n_row_] = 0, row_.b[n_row_] = 0, row_.r[n_row_] = 0;
+  }
+  HalfPlanes lo_, hi_, row_;
   int n_lo_ = 0, n_hi_ = 0, n_row_ = 0;
   double slack_;
 };
@@ -795,6 +822,137 @@ std::size_t project_column(const Sensor& sensor, double terms[3][3], const Vecto
   return project_column_pairs<2>(sensor, terms, base, h, i0, i1, ic, t, batch, n);
 #else
   return project_column_scalar(sensor, terms, base, ax, h, i0, i1, ic, t, batch, n);
+#endif
+}
+
+// Phase 3 of the kernel for the owned candidates of a row: distance, weight and colour
+// (voxel_sample); the candidates that get a contribution are listed in `batch.sampled`, their
+// count returned.
+[[maybe_unused]] std::size_t sample_candidates_scalar(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
+                                     const IntegrateOptions& options, const std::uint32_t* packed, RowBatch& batch,
+                                     std::size_t owned) {
+  std::size_t sampled = 0;
+  for (std::size_t j = 0; j < owned; ++j) {
+    const std::uint32_t k = batch.owned[j];
+    Candidate& cand = batch.cand[k];
+    const GridTriangle& g = p.tris[cand.owner];
+    if (level < g.coarsest || level > g.level) continue;
+    const double ramp = p.ramp[g.level][level];
+    const double plane = g.normal.dot(g.P0.cast<double>() - cand.X);
+    if (beyond_ramp(plane, ramp, options)) continue;
+    const double cosine = sight_cosine(g.normal, cand.X - centre);
+    if (!voxel_sample(frame, g.idx, *cand.shape, cand.E, plane, cosine, ramp, options, &cand.sample, packed)) continue;
+    batch.sampled[sampled++] = k;
+  }
+  return sampled;
+}
+
+#if defined(__SSE2__) && defined(__x86_64__)
+// sample_candidates_scalar two candidates at a time, one per lane: every test of beyond_ramp,
+// sight_cosine and voxel_sample as a mask, on the same operations in the same order (Eigen sums
+// a 3-vector's dot product and squared norm left to right), so the same bits. A candidate's
+// distance, weight and confidence are a chain of a square root and three divisions; two lanes
+// halve them, and the masks replace four branches per candidate that a voxel near the ramp's
+// ends or a triangle's edge makes unpredictable.
+std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
+                                    const IntegrateOptions& options, const std::uint32_t* packed, RowBatch& batch,
+                                    std::size_t owned) {
+  const bool has_confidence = !frame.confidence.empty(), has_colour = !frame.colour.empty();
+  const __m128d zero = _mm_setzero_pd(), one = _mm_set1_pd(1.0), behind = _mm_set1_pd(options.behind),
+                min_cosine = _mm_set1_pd(options.min_cosine), sign = _mm_set1_pd(-0.0);
+  const __m128d cx = _mm_set1_pd(centre.x()), cy = _mm_set1_pd(centre.y()), cz = _mm_set1_pd(centre.z());
+  const auto pair = [](double a, double b) { return _mm_set_pd(b, a); };  // a in lane 0
+  std::size_t sampled = 0;
+  for (std::size_t j = 0; j < owned; j += 2) {
+    const bool two = j + 1 < owned;
+    const std::uint32_t k[2] = {batch.owned[j], two ? batch.owned[j + 1] : batch.owned[j]};
+    Candidate* c[2] = {&batch.cand[k[0]], &batch.cand[k[1]]};
+    const GridTriangle* g[2] = {&p.tris[c[0]->owner], &p.tris[c[1]->owner]};
+    bool level_ok[2];
+    double ramp_of[2];
+    for (int l = 0; l < 2; ++l) {
+      level_ok[l] = !(level < g[l]->coarsest || level > g[l]->level);
+      ramp_of[l] = level_ok[l] ? p.ramp[g[l]->level][level] : 1.0;
+    }
+    const __m128d nx = pair(g[0]->normal.x(), g[1]->normal.x()), ny = pair(g[0]->normal.y(), g[1]->normal.y()),
+                  nz = pair(g[0]->normal.z(), g[1]->normal.z());
+    const __m128d X = pair(c[0]->X.x(), c[1]->X.x()), Y = pair(c[0]->X.y(), c[1]->X.y()),
+                  Z = pair(c[0]->X.z(), c[1]->X.z());
+    const __m128d ramp = pair(ramp_of[0], ramp_of[1]);
+    // plane = normal . (P0 - X), P0 widened from float (exact).
+    const __m128d px = _mm_sub_pd(pair(g[0]->P0.x(), g[1]->P0.x()), X),
+                  py = _mm_sub_pd(pair(g[0]->P0.y(), g[1]->P0.y()), Y),
+                  pz = _mm_sub_pd(pair(g[0]->P0.z(), g[1]->P0.z()), Z);
+    const __m128d plane = _mm_add_pd(_mm_add_pd(_mm_mul_pd(nx, px), _mm_mul_pd(ny, py)), _mm_mul_pd(nz, pz));
+    // beyond_ramp: in front beyond ramp * behind, or behind beyond ramp.
+    const __m128d in_front = _mm_cmpgt_pd(plane, zero);
+    const __m128d beyond = _mm_or_pd(_mm_and_pd(in_front, _mm_cmpgt_pd(plane, _mm_mul_pd(ramp, behind))),
+                                     _mm_andnot_pd(in_front, _mm_cmpgt_pd(_mm_xor_pd(plane, sign), ramp)));
+    // sight_cosine: normal . D / sqrt(D . D), D = X - centre.
+    const __m128d dx = _mm_sub_pd(X, cx), dy = _mm_sub_pd(Y, cy), dz = _mm_sub_pd(Z, cz);
+    const __m128d squared = _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)), _mm_mul_pd(dz, dz));
+    const __m128d dot = _mm_add_pd(_mm_add_pd(_mm_mul_pd(nx, dx), _mm_mul_pd(ny, dy)), _mm_mul_pd(nz, dz));
+    const __m128d cosine = _mm_div_pd(dot, _mm_sqrt_pd(squared));
+    const __m128d minus_cosine = _mm_xor_pd(cosine, sign);
+    // voxel_sample: facing enough, within the ramp (shortened behind the surface), weight > 0.
+    const __m128d facing = _mm_cmpge_pd(minus_cosine, min_cosine);
+    const __m128d distance = _mm_div_pd(plane, cosine);
+    const __m128d behind_surface = _mm_cmplt_pd(distance, zero);
+    const __m128d ramp_here =
+        _mm_or_pd(_mm_and_pd(behind_surface, _mm_mul_pd(ramp, behind)), _mm_andnot_pd(behind_surface, ramp));
+    const __m128d magnitude = _mm_andnot_pd(sign, distance);
+    const __m128d within = _mm_cmple_pd(magnitude, ramp_here);
+    double bary[2][3];
+    for (int l = 0; l < 2; ++l) c[l]->shape->bary(c[l]->E, bary[l]);
+    __m128d conf = one;
+    if (has_confidence) {
+      const float* cf = frame.confidence.data();
+      const std::uint32_t* i0 = g[0]->idx;
+      const std::uint32_t* i1 = g[1]->idx;
+      conf = _mm_add_pd(_mm_add_pd(_mm_mul_pd(pair(bary[0][0], bary[1][0]), pair(cf[i0[0]], cf[i1[0]])),
+                                   _mm_mul_pd(pair(bary[0][1], bary[1][1]), pair(cf[i0[1]], cf[i1[1]]))),
+                        _mm_mul_pd(pair(bary[0][2], bary[1][2]), pair(cf[i0[2]], cf[i1[2]])));
+    }
+    // tent_weight: max(0, 1 - |distance| / ramp); maxpd gives the second operand for a NaN, as
+    // std::max(0.0, x) does.
+    const __m128d tent = _mm_max_pd(_mm_sub_pd(one, _mm_div_pd(magnitude, ramp_here)), zero);
+    const __m128d weight = _mm_mul_pd(_mm_mul_pd(minus_cosine, tent), conf);
+    const __m128d positive = _mm_cmpgt_pd(weight, zero);
+    const int accept = _mm_movemask_pd(_mm_andnot_pd(beyond, _mm_and_pd(_mm_and_pd(facing, within), positive))) &
+                       (int(level_ok[0]) | (int(level_ok[1] && two) << 1));
+    if (!accept) continue;
+    const __m128 distance_f = _mm_cvtpd_ps(distance), weight_f = _mm_cvtpd_ps(weight);
+    alignas(16) float df[4], wf[4];
+    _mm_store_ps(df, distance_f);
+    _mm_store_ps(wf, weight_f);
+    for (int l = 0; l < 2; ++l) {
+      if (!(accept >> l & 1)) continue;
+      VoxelSample& s = c[l]->sample;
+      s.distance = df[l];
+      s.weight = wf[l];
+      s.has_colour = has_colour;
+      if (has_colour) {
+        const std::uint32_t* idx = g[l]->idx;
+        const auto colour_of = [&](std::uint32_t i) { return packed ? packed[i] : packed_colour(frame.colour[i]); };
+        const std::uint32_t rgb[3] = {colour_of(idx[0]), colour_of(idx[1]), colour_of(idx[2])};
+        interpolate_colour(bary[l], rgb, s.colour);
+      } else {
+        s.colour[0] = s.colour[1] = s.colour[2] = 0;
+      }
+      batch.sampled[sampled++] = k[l];
+    }
+  }
+  return sampled;
+}
+#endif
+
+std::size_t sample_candidates(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
+                              const IntegrateOptions& options, const std::uint32_t* packed, RowBatch& batch,
+                              std::size_t owned) {
+#if defined(__SSE2__) && defined(__x86_64__)
+  return sample_candidates_pairs(p, frame, level, centre, options, packed, batch, owned);
+#else
+  return sample_candidates_scalar(p, frame, level, centre, options, packed, batch, owned);
 #endif
 }
 
@@ -1006,20 +1164,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             batch.owned[owned++] = k;
           }
           // Phase 3: distance, weight and colour.
-          std::size_t sampled = 0;
-          for (std::size_t j = 0; j < owned; ++j) {
-            const std::uint32_t k = batch.owned[j];
-            Candidate& cand = batch.cand[k];
-            const GridTriangle& g = tris[cand.owner];
-            if (level < g.coarsest || level > g.level) continue;
-            const double ramp = p.ramp[g.level][level];
-            const double plane = g.normal.dot(g.P0.cast<double>() - cand.X);
-            if (beyond_ramp(plane, ramp, options)) continue;
-            const double cosine = sight_cosine(g.normal, cand.X - centre);
-            if (!voxel_sample(frame, g.idx, *cand.shape, cand.E, plane, cosine, ramp, options, &cand.sample, packed))
-              continue;
-            batch.sampled[sampled++] = k;
-          }
+          const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned);
           // Phase 4: the voxels, each asked for ahead of its write. A column crosses a block every
           // 2^log voxels, so a voxel's block is mostly the one in hand, and the key, its origin
           // and the block cache are consulted once per block.
@@ -1044,8 +1189,25 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             cand.voxel = &run_voxels[column_offset | ((std::uint32_t(ia) & in_block) << shift_a)];
             __builtin_prefetch(cand.voxel, 1);
           }
-          // Phase 5: the writes.
-          for (std::size_t j = 0; j < sampled; ++j) {
+          // Phase 5: the writes, four at a time where the depth map has colour (the voxels of a
+          // row are distinct: each gets at most one contribution).
+          std::size_t j = 0;
+          if (!frame.colour.empty()) {
+            for (; j + 4 <= sampled; j += 4) {
+              VoxelData* voxels[4];
+              float distance[4], weight[4];
+              const std::uint8_t* colour[4];
+              for (int lane = 0; lane < 4; ++lane) {
+                const Candidate& cand = batch.cand[batch.sampled[j + lane]];
+                voxels[lane] = cand.voxel;
+                distance[lane] = cand.sample.distance;
+                weight[lane] = cand.sample.weight;
+                colour[lane] = cand.sample.colour;
+              }
+              accumulate4(voxels, distance, weight, colour);
+            }
+          }
+          for (; j < sampled; ++j) {
             const Candidate& cand = batch.cand[batch.sampled[j]];
             const VoxelSample& v = cand.sample;
             accumulate(*cand.voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);

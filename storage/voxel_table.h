@@ -125,6 +125,77 @@ inline void accumulate(VoxelData& v, float distance, float weight, const std::ui
   v.weight = W;
 }
 
+// accumulate() for four distinct voxels at once, each with colour: the voxels' fields side by side
+// in the lanes of four registers (one 4 x 4 transpose of their 16 bytes each way), and in each lane
+// the same float operations in the same order as accumulate(), so the same bits; its two
+// divisions and its branches on the colour weight then serve four contributions. A lane whose
+// colour weight falls short of its weight (some earlier contribution had no colour) takes
+// share_of's double division, lane by lane.
+#if defined(__SSE2__) && defined(__x86_64__)
+inline void accumulate4(VoxelData* const v[4], const float distance[4], const float weight[4],
+                        const std::uint8_t* const colour[4]) {
+  static_assert(offsetof(VoxelData, weight) == 4 && offsetof(VoxelData, colour_fixed) == 8);
+  __m128 r0 = _mm_loadu_ps(reinterpret_cast<const float*>(v[0])), r1 = _mm_loadu_ps(reinterpret_cast<const float*>(v[1])),
+         r2 = _mm_loadu_ps(reinterpret_cast<const float*>(v[2])), r3 = _mm_loadu_ps(reinterpret_cast<const float*>(v[3]));
+  _MM_TRANSPOSE4_PS(r0, r1, r2, r3);  // r0 distances, r1 weights, r2 colour 0 | 1, r3 colour 2 | share
+  const __m128 d = _mm_loadu_ps(distance), w = _mm_loadu_ps(weight), zero = _mm_setzero_ps();
+  const __m128i low16 = _mm_set1_epi32(0xffff);
+  const __m128 W = _mm_add_ps(r1, w);
+  const __m128 D = _mm_div_ps(_mm_add_ps(_mm_mul_ps(r1, r0), _mm_mul_ps(w, d)), W);
+  // colour_weight(): 0 unless live with a share; the weight itself at the full share.
+  const __m128i share = _mm_srli_epi32(_mm_castps_si128(r3), 16);
+  const __m128 scaled = _mm_mul_ps(r1, _mm_div_ps(_mm_cvtepi32_ps(share), _mm_set1_ps(float(VoxelData::kFullShare))));
+  const __m128 full = _mm_castsi128_ps(_mm_cmpeq_epi32(share, _mm_set1_epi32(VoxelData::kFullShare)));
+  const __m128 has = _mm_andnot_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(share, _mm_setzero_si128())), _mm_cmpgt_ps(r1, zero));
+  const __m128 before = _mm_and_ps(has, _mm_or_ps(_mm_and_ps(full, r1), _mm_andnot_ps(full, scaled)));
+  const __m128 Wc = _mm_add_ps(before, w);
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), Wc);
+  // blend_colour per channel: (before mean + weight c) inv, then colour_to_fixed as there.
+  alignas(16) std::int32_t c[3][4];
+  for (int lane = 0; lane < 4; ++lane)
+    for (int k = 0; k < 3; ++k) c[k][lane] = colour[lane][k];
+  const __m128i fixed_in[3] = {_mm_and_si128(_mm_castps_si128(r2), low16), _mm_srli_epi32(_mm_castps_si128(r2), 16),
+                               _mm_and_si128(_mm_castps_si128(r3), low16)};
+  __m128i fixed[3];
+  for (int k = 0; k < 3; ++k) {
+    const __m128 mean = _mm_mul_ps(_mm_cvtepi32_ps(fixed_in[k]), _mm_set1_ps(1.0f / VoxelData::kColourUnit));
+    const __m128 blended = _mm_mul_ps(
+        _mm_add_ps(_mm_mul_ps(before, mean), _mm_mul_ps(w, _mm_cvtepi32_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(c[k]))))),
+        inv);
+    const __m128 f = _mm_min_ps(_mm_add_ps(_mm_mul_ps(_mm_max_ps(blended, zero), _mm_set1_ps(VoxelData::kColourUnit)),
+                                           _mm_set1_ps(0.5f)),
+                                _mm_set1_ps(65535.0f));
+    fixed[k] = _mm_cvttps_epi32(f);
+  }
+  // colour_share: full where Wc >= W, else share_of(Wc, W) in double (lane by lane, rare).
+  __m128i share_out = _mm_set1_epi32(VoxelData::kFullShare);
+  const int short_lanes = ~_mm_movemask_ps(_mm_cmpge_ps(Wc, W)) & 15;  // a NaN too, as there
+  if (short_lanes) {
+    alignas(16) float wc[4], wt[4];
+    alignas(16) std::int32_t s[4];
+    _mm_store_ps(wc, Wc);
+    _mm_store_ps(wt, W);
+    _mm_store_si128(reinterpret_cast<__m128i*>(s), share_out);
+    for (int lane = 0; lane < 4; ++lane)
+      if (short_lanes >> lane & 1) s[lane] = VoxelData::share_of(wc[lane], wt[lane]);
+    share_out = _mm_load_si128(reinterpret_cast<const __m128i*>(s));
+  }
+  __m128 o0 = D, o1 = W;
+  __m128 o2 = _mm_castsi128_ps(_mm_or_si128(fixed[0], _mm_slli_epi32(fixed[1], 16)));
+  __m128 o3 = _mm_castsi128_ps(_mm_or_si128(fixed[2], _mm_slli_epi32(share_out, 16)));
+  _MM_TRANSPOSE4_PS(o0, o1, o2, o3);
+  _mm_storeu_ps(reinterpret_cast<float*>(v[0]), o0);
+  _mm_storeu_ps(reinterpret_cast<float*>(v[1]), o1);
+  _mm_storeu_ps(reinterpret_cast<float*>(v[2]), o2);
+  _mm_storeu_ps(reinterpret_cast<float*>(v[3]), o3);
+}
+#else
+inline void accumulate4(VoxelData* const v[4], const float distance[4], const float weight[4],
+                        const std::uint8_t* const colour[4]) {
+  for (int lane = 0; lane < 4; ++lane) accumulate(*v[lane], distance[lane], weight[lane], colour[lane]);
+}
+#endif
+
 inline constexpr int kMaxBlockLog = 2;
 
 // log2 of a block's edge in voxels for `level` (see above).

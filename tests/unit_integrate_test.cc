@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <set>
 
@@ -344,6 +345,64 @@ TEST(IntegrateKernel, ColourInLanesEqualsTheScalarReference) {
     for (int k = 0; k < 3; ++k) ASSERT_EQ(lanes.colour_fixed[k], scalar.colour_fixed[k]) << i << " channel " << k;
     ASSERT_EQ(lanes.colour_share, scalar.colour_share);
   }
+}
+
+// Four contributions at once (the voxel-centric kernel's writes) must leave each voxel with the
+// bits accumulate() gives it: new voxels, live ones with a full, partial or no colour share,
+// erased ones, and contributions whose colour weight falls short of the weight.
+TEST(IntegrateKernel, FourAccumulationsEqualTheScalarReference) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> w(0.0f, 4.0f), d(-0.05f, 0.05f);
+  std::uniform_int_distribution<int> fixed(0, 65535), byte(0, 255), kind(0, 5);
+  std::size_t partial = 0;
+  for (int i = 0; i < 100000; ++i) {
+    VoxelData lanes[4], scalar[4];
+    float distance[4], weight[4];
+    std::uint8_t colour[4][3];
+    VoxelData* pointers[4];
+    const std::uint8_t* colours[4];
+    for (int l = 0; l < 4; ++l) {
+      VoxelData& v = lanes[l];
+      switch (kind(rng)) {
+        case 0:  // absent
+          break;
+        case 1:  // erased
+          v.weight = -w(rng);
+          v.distance = d(rng);
+          break;
+        case 2:  // live, no colour yet
+          v.weight = w(rng) + 1e-3f;
+          v.distance = d(rng);
+          break;
+        case 3:  // live with part of its weight coloured
+          v.weight = w(rng) + 1e-3f;
+          v.distance = d(rng);
+          v.colour_share = std::uint16_t(fixed(rng) % 65535);
+          ++partial;
+          break;
+        default:  // live, all coloured
+          v.weight = w(rng) + 1e-3f;
+          v.distance = d(rng);
+          v.colour_share = VoxelData::kFullShare;
+      }
+      for (auto& f : v.colour_fixed) f = std::uint16_t(fixed(rng));
+      scalar[l] = v;
+      distance[l] = d(rng);
+      weight[l] = i % 19 == 0 ? 1e-30f : w(rng) + 1e-6f;
+      for (auto& c : colour[l]) c = std::uint8_t(byte(rng));
+      pointers[l] = &lanes[l];
+      colours[l] = colour[l];
+    }
+    accumulate4(pointers, distance, weight, colours);
+    for (int l = 0; l < 4; ++l) {
+      accumulate(scalar[l], distance[l], weight[l], colour[l]);
+      ASSERT_EQ(std::memcmp(&lanes[l], &scalar[l], sizeof(VoxelData)), 0)
+          << "round " << i << " lane " << l << ": distance " << lanes[l].distance << " vs " << scalar[l].distance
+          << ", weight " << lanes[l].weight << " vs " << scalar[l].weight << ", share " << lanes[l].colour_share
+          << " vs " << scalar[l].colour_share;
+    }
+  }
+  EXPECT_GT(partial, 10000u);
 }
 
 // The voxel-centric enumeration must give the very field the prism enumeration gives: the same
