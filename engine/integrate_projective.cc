@@ -690,23 +690,30 @@ struct Candidate {
   const Ownership* shape;         // the owner's shape (moved by the quad's column and row)
   std::int32_t owner;             // the owner's index in Prepared::tris
   std::int32_t col, row;          // the pixel quad q falls in
-  std::int32_t ia, ic;            // lattice indices along the column's axis and the row's
+  std::int32_t ia, ib, ic;        // lattice indices along the column's axis, the row's and the column's
   VoxelSample sample;
   VoxelData* voxel;               // where the sample goes
 };
 
-// The candidates of a lattice row, and which of them are still in after the owner and the sample
-// phases (indices, so that no candidate is copied). Never shrinks; its elements are written
-// before they are read, so growth is the only zeroing.
-struct RowBatch {
-  std::vector<Candidate> cand;
-  std::vector<std::uint32_t> owned, sampled;
-  std::size_t size() const { return cand.size(); }
-  void grow(std::size_t n) {
-    n = std::max<std::size_t>(2 * n, 256);
-    cand.resize(n);
-    owned.resize(n);
-    sampled.resize(n);
+// The candidates of a work item, and which of them are still in after the owner and the sample
+// phases (indices, so that no candidate is copied). Reused from item to item and never shrunk;
+// its elements are written before they are read, so they are left uninitialized (growth used to
+// value-initialize them: a memset of some 400 MB over igea's integration, in the tasks' fresh
+// batches).
+struct ItemBatch {
+  std::unique_ptr<Candidate[]> cand;
+  std::unique_ptr<std::uint32_t[]> owned, sampled;
+  std::size_t capacity = 0;
+  std::size_t size() const { return capacity; }
+  // Room for at least n candidates, keeping the first `used`.
+  void grow(std::size_t n, std::size_t used) {
+    const std::size_t c = std::max<std::size_t>(2 * n, 256);
+    std::unique_ptr<Candidate[]> more(new Candidate[c]);
+    std::copy(cand.get(), cand.get() + used, more.get());
+    cand = std::move(more);
+    owned.reset(new std::uint32_t[c]);
+    sampled.reset(new std::uint32_t[c]);
+    capacity = c;
   }
 };
 
@@ -718,7 +725,7 @@ struct ColumnTile {
 };
 [[maybe_unused]] std::size_t project_column_scalar(const Sensor& sensor, double terms[3][3], const Vector3d& base,
                                                    int ax, double h, std::int64_t i0, std::int64_t i1, std::int64_t ic,
-                                                   ColumnTile t, RowBatch& batch, std::size_t n) {
+                                                   ColumnTile t, ItemBatch& batch, std::size_t n) {
   for (std::int64_t ia = i0; ia <= i1; ++ia) {
     Vector3d X = base;
     X[ax] += h * double(ia);
@@ -744,7 +751,7 @@ struct ColumnTile {
 // the batch and the count moves past those kept, so the batch needs room for one more.
 template <int AX>
 std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3], const Vector3d& base, double h,
-                                 std::int64_t i0, std::int64_t i1, std::int64_t ic, ColumnTile t, RowBatch& batch,
+                                 std::int64_t i0, std::int64_t i1, std::int64_t ic, ColumnTile t, ItemBatch& batch,
                                  std::size_t n) {
   constexpr int B = (AX + 1) % 3, C = (AX + 2) % 3;
   // Per camera coordinate i: the lanes' term v = R(i, AX) X[AX], then s = v + k1, s = s + k2 (if
@@ -814,7 +821,7 @@ std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3],
 #endif
 
 std::size_t project_column(const Sensor& sensor, double terms[3][3], const Vector3d& base, int ax, double h,
-                           std::int64_t i0, std::int64_t i1, std::int64_t ic, ColumnTile t, RowBatch& batch,
+                           std::int64_t i0, std::int64_t i1, std::int64_t ic, ColumnTile t, ItemBatch& batch,
                            std::size_t n) {
 #if defined(__SSE2__) && defined(__x86_64__)
   if (ax == 0) return project_column_pairs<0>(sensor, terms, base, h, i0, i1, ic, t, batch, n);
@@ -829,7 +836,7 @@ std::size_t project_column(const Sensor& sensor, double terms[3][3], const Vecto
 // (voxel_sample); the candidates that get a contribution are listed in `batch.sampled`, their
 // count returned.
 [[maybe_unused]] std::size_t sample_candidates_scalar(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
-                                     const IntegrateOptions& options, const std::uint32_t* packed, RowBatch& batch,
+                                     const IntegrateOptions& options, const std::uint32_t* packed, ItemBatch& batch,
                                      std::size_t owned) {
   std::size_t sampled = 0;
   for (std::size_t j = 0; j < owned; ++j) {
@@ -855,7 +862,7 @@ std::size_t project_column(const Sensor& sensor, double terms[3][3], const Vecto
 // halve them, and the masks replace four branches per candidate that a voxel near the ramp's
 // ends or a triangle's edge makes unpredictable.
 std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
-                                    const IntegrateOptions& options, const std::uint32_t* packed, RowBatch& batch,
+                                    const IntegrateOptions& options, const std::uint32_t* packed, ItemBatch& batch,
                                     std::size_t owned) {
   const bool has_confidence = !frame.confidence.empty(), has_colour = !frame.colour.empty();
   const __m128d zero = _mm_setzero_pd(), one = _mm_set1_pd(1.0), behind = _mm_set1_pd(options.behind),
@@ -947,7 +954,7 @@ std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, 
 #endif
 
 std::size_t sample_candidates(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
-                              const IntegrateOptions& options, const std::uint32_t* packed, RowBatch& batch,
+                              const IntegrateOptions& options, const std::uint32_t* packed, ItemBatch& batch,
                               std::size_t owned) {
 #if defined(__SSE2__) && defined(__x86_64__)
   return sample_candidates_pairs(p, frame, level, centre, options, packed, batch, owned);
@@ -1036,7 +1043,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
     tbb::parallel_for(chunk, [&](const tbb::blocked_range<std::size_t>& range) {
       std::size_t local = 0;
       BlockCache cache(map);
-      RowBatch batch;  // one lattice row's candidate voxels
+      ItemBatch batch;  // one work item's candidate voxels, reused item after item
       for (std::size_t it = range.begin(); it != range.end(); ++it) {
         const int level = items[it].level, tile = items[it].tile;
         ItemFrustum fr = item_frustum(p, root, tile, level);
@@ -1072,20 +1079,22 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         const int log = block_log(level, brick_level);
         const std::uint32_t in_block = (1u << log) - 1;
         const int shift_a = ax * log;
+        std::size_t n = 0;  // candidates in the batch
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
           std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
           if (!prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
           double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
           for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
           bounds.set_row(cp, row_value);
-          // The row's candidates go through the kernel in phases, each a loop over all of them:
-          // projection, owner, sample, voxel, write. A candidate's work is one long chain of dependent
-          // steps (a division, a floor, the quad, the shape, the owner's record, a square root,
-          // two more divisions, the voxel), longer than the core's window of instructions, so
-          // done candidate by candidate the chains ran one after another; in short loops the
-          // chains of neighbouring candidates overlap. Each voxel gets the same arithmetic either
-          // way, and at most one contribution per depth map, so the field is the same.
-          std::size_t n = 0;  // candidates in the batch
+          // The item's candidates go through the kernel in phases, each a loop over all of them:
+          // projection (row by row, here), owner, sample, voxel, write. A candidate's work is one
+          // long chain of dependent steps (a division, a floor, the quad, the shape, the owner's
+          // record, a square root, two more divisions, the voxel), longer than the core's window
+          // of instructions, so done candidate by candidate the chains ran one after another; in
+          // loops over many candidates the chains overlap, and the owners' records and the voxels
+          // asked for ahead of use (phases 2 and 4) arrive while others are worked on. Each voxel
+          // gets the same arithmetic either way, and at most one contribution per depth map, so
+          // the field is the same.
           for (std::int64_t ic = ic0; ic <= ic1; ++ic) {
             Vector3d base;
             base[ax] = root.min[ax];
@@ -1106,10 +1115,15 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             camera_terms(R, base, bx, terms);
             camera_terms(R, base, cx, terms);
             // Room for every voxel of the column and one more (project_column_pairs).
-            if (i1 >= i0 && n + std::size_t(i1 - i0 + 2) > batch.size()) batch.grow(n + std::size_t(i1 - i0 + 2));
+            if (i1 >= i0 && n + std::size_t(i1 - i0 + 2) > batch.size()) batch.grow(n + std::size_t(i1 - i0 + 2), n);
             // Phase 1: project; keep the voxels whose quad is this tile's.
-            if (i1 >= i0) n = project_column(sensor, terms, base, ax, h, i0, i1, ic, ColumnTile{c0, c1, r0, r1}, batch, n);
+            if (i1 < i0) continue;
+            const std::size_t column_start = n;
+            n = project_column(sensor, terms, base, ax, h, i0, i1, ic, ColumnTile{c0, c1, r0, r1}, batch, n);
+            for (std::size_t k = column_start; k < n; ++k) batch.cand[k].ib = std::int32_t(ib);
           }
+        }
+        {
           // Phase 2: the owner, one of the quad's triangles (chosen by the diagonal's side if the
           // quad is split in two, else the likelier tried first), or, on the quad's left or top
           // border, one of the neighbouring quads' (edge functions give a shared edge to one side
@@ -1168,13 +1182,13 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           // Phase 4: the voxels, each asked for ahead of its write. A column crosses a block every
           // 2^log voxels, so a voxel's block is mostly the one in hand, and the key, its origin
           // and the block cache are consulted once per block.
-          std::int64_t run_ic = -1, run = -1;  // column and ia >> log of the block in hand
+          std::int64_t run_ib = -1, run_ic = -1, run = -1;  // row, column and ia >> log of the block in hand
           VoxelData* run_voxels = nullptr;
           std::uint32_t column_offset = 0;
           for (std::size_t j = 0; j < sampled; ++j) {
             Candidate& cand = batch.cand[batch.sampled[j]];
-            const std::int64_t ia = cand.ia, ic = cand.ic;
-            if (ic != run_ic || (ia >> log) != run) {
+            const std::int64_t ia = cand.ia, ib = cand.ib, ic = cand.ic;
+            if (ic != run_ic || ib != run_ib || (ia >> log) != run) {
               std::int64_t idx[3];
               idx[ax] = ia;
               idx[bx] = ib;
@@ -1184,13 +1198,14 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               run_voxels = cache.block(key, block_origin(key, brick_level));
               run = ia >> log;
               run_ic = ic;
+              run_ib = ib;
               column_offset = ((std::uint32_t(ib) & in_block) << (bx * log)) | ((std::uint32_t(ic) & in_block) << (cx * log));
             }
             cand.voxel = &run_voxels[column_offset | ((std::uint32_t(ia) & in_block) << shift_a)];
             __builtin_prefetch(cand.voxel, 1);
           }
-          // Phase 5: the writes, four at a time where the depth map has colour (the voxels of a
-          // row are distinct: each gets at most one contribution).
+          // Phase 5: the writes, four at a time where the depth map has colour (the voxels of an
+          // item are distinct: each gets at most one contribution).
           std::size_t j = 0;
           if (!frame.colour.empty()) {
             for (; j + 4 <= sampled; j += 4) {
