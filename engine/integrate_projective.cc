@@ -414,8 +414,13 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       double zmin, zmax, smin, smax, below, above;
       int coarsest;  // the same for every triangle of one level of equation 1
     };
-    Extent extent[L];
+    // Per level of equation 1, the vertices of its triangles, a bit each: a vertex is shared by up
+    // to six triangles, so the extents then take each vertex once (min and max do not depend on
+    // the order) rather than once per triangle.
+    static_assert(kSide * kSide <= 64, "a tile's vertices fit in one mask");
     static_assert(L <= 32, "levels_seen holds a bit per level");
+    std::uint64_t used[L];
+    int coarsest_of[L];
     std::uint32_t levels_seen = 0;  // bit lt: some triangle of level lt
     for (int r = qr0; r < qr1; ++r)
       for (int c = qc0; c < qc1; ++c) {
@@ -424,24 +429,33 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
           if (qd.tri[slot] < 0) continue;
           const GridTriangle& g = tris[qd.tri[slot]];
           if (!g.ok) continue;
-          Extent& e = extent[g.level];
           if (!(levels_seen >> g.level & 1)) {
-            const double inf = std::numeric_limits<double>::infinity();
-            e = Extent{inf, -inf, inf, -inf, inf, -inf, g.coarsest};
+            used[g.level] = 0;
+            coarsest_of[g.level] = g.coarsest;
             levels_seen |= 1u << g.level;
           }
           for (int k = 0; k < 3; ++k) {
             const int corner = (qd.shape[slot] >> (2 * k)) & 3;
-            const int v = (r - qr0 + (corner >> 1)) * vw + (c - qc0 + (corner & 1));
-            e.zmin = std::min(e.zmin, vz[v]);
-            e.zmax = std::max(e.zmax, vz[v]);
-            e.smin = std::min(e.smin, vs[v]);
-            e.smax = std::max(e.smax, vs[v]);
-            e.below = std::min(e.below, vbelow[v]);
-            e.above = std::max(e.above, vabove[v]);
+            used[g.level] |= std::uint64_t{1} << ((r - qr0 + (corner >> 1)) * vw + (c - qc0 + (corner & 1)));
           }
         }
       }
+    Extent extent[L];
+    for (int lt = 0; lt < L; ++lt) {
+      if (!(levels_seen >> lt & 1)) continue;
+      const double inf = std::numeric_limits<double>::infinity();
+      Extent& e = extent[lt];
+      e = Extent{inf, -inf, inf, -inf, inf, -inf, coarsest_of[lt]};
+      for (std::uint64_t m = used[lt]; m != 0; m &= m - 1) {
+        const int v = std::countr_zero(m);
+        e.zmin = std::min(e.zmin, vz[v]);
+        e.zmax = std::max(e.zmax, vz[v]);
+        e.smin = std::min(e.smin, vs[v]);
+        e.smax = std::max(e.smax, vs[v]);
+        e.below = std::min(e.below, vbelow[v]);
+        e.above = std::max(e.above, vabove[v]);
+      }
+    }
     for (int lt = 0; lt < L; ++lt) {
       if (!(levels_seen >> lt & 1)) continue;
       const Extent& e = extent[lt];
