@@ -232,6 +232,19 @@ struct VoxelSample {
   std::uint8_t colour[3];
   bool has_colour;
 };
+// A contribution's colour: the vertex colours interpolated at barycentric coordinates `bary`
+// (none if the frame has no colour). `packed`, if given, holds them as packed_colour words.
+inline void sample_colour(const DepthFrame& frame, const std::uint32_t idx[3], const double bary[3],
+                          const std::uint32_t* packed, VoxelSample* out) {
+  out->has_colour = !frame.colour.empty();
+  if (out->has_colour) {
+    const auto colour_of = [&](std::uint32_t i) { return packed ? packed[i] : packed_colour(frame.colour[i]); };
+    const std::uint32_t c[3] = {colour_of(idx[0]), colour_of(idx[1]), colour_of(idx[2])};
+    interpolate_colour(bary, c, out->colour);
+  } else {
+    out->colour[0] = out->colour[1] = out->colour[2] = 0;
+  }
+}
 // `packed`, if given, holds the frame's colours as packed_colour words.
 inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], const Ownership& own, const double E[3],
                          double plane, double cosine, double ramp, const IntegrateOptions& options, VoxelSample* out,
@@ -249,14 +262,7 @@ inline bool voxel_sample(const DepthFrame& frame, const std::uint32_t idx[3], co
   if (!(weight > 0)) return false;
   out->distance = float(distance);
   out->weight = float(weight);
-  out->has_colour = !frame.colour.empty();
-  if (out->has_colour) {
-    const auto colour_of = [&](std::uint32_t i) { return packed ? packed[i] : packed_colour(frame.colour[i]); };
-    const std::uint32_t c[3] = {colour_of(idx[0]), colour_of(idx[1]), colour_of(idx[2])};
-    interpolate_colour(bary, c, out->colour);
-  } else {
-    out->colour[0] = out->colour[1] = out->colour[2] = 0;
-  }
+  sample_colour(frame, idx, bary, packed, out);
   return true;
 }
 

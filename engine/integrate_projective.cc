@@ -878,7 +878,7 @@ std::size_t project_column(const Sensor& sensor, double terms[3][3], const Vecto
 std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
                                     const IntegrateOptions& options, const std::uint32_t* packed, ItemBatch& batch,
                                     std::size_t owned) {
-  const bool has_confidence = !frame.confidence.empty(), has_colour = !frame.colour.empty();
+  const bool has_confidence = !frame.confidence.empty();
   const __m128d zero = _mm_setzero_pd(), one = _mm_set1_pd(1.0), behind = _mm_set1_pd(options.behind),
                 min_cosine = _mm_set1_pd(options.min_cosine), sign = _mm_set1_pd(-0.0);
   const __m128d cx = _mm_set1_pd(centre.x()), cy = _mm_set1_pd(centre.y()), cz = _mm_set1_pd(centre.z());
@@ -951,15 +951,7 @@ std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, 
       VoxelSample& s = c[l]->sample;
       s.distance = df[l];
       s.weight = wf[l];
-      s.has_colour = has_colour;
-      if (has_colour) {
-        const std::uint32_t* idx = g[l]->idx;
-        const auto colour_of = [&](std::uint32_t i) { return packed ? packed[i] : packed_colour(frame.colour[i]); };
-        const std::uint32_t rgb[3] = {colour_of(idx[0]), colour_of(idx[1]), colour_of(idx[2])};
-        interpolate_colour(bary[l], rgb, s.colour);
-      } else {
-        s.colour[0] = s.colour[1] = s.colour[2] = 0;
-      }
+      sample_colour(frame, g[l]->idx, bary[l], packed, &s);
       batch.sampled[sampled++] = k[l];
     }
   }

@@ -78,6 +78,15 @@ inline void blend_colour_scalar(VoxelData& v, float before, float weight, const 
     v.colour_fixed[k] = VoxelData::colour_to_fixed((before * v.colour(k) + weight * float(colour[k])) * inv);
 }
 #if defined(__SSE2__) && defined(__x86_64__)
+// VoxelData::colour_to_fixed per lane, as 32-bit integers: max clamps a NaN or -0 to 0 (then 0.5
+// truncates to 0, as !(c > 0) gives), min saturates at 65535.
+inline __m128i colour_to_fixed_lanes(__m128 c) {
+  const __m128 f = _mm_min_ps(
+      _mm_add_ps(_mm_mul_ps(_mm_max_ps(c, _mm_setzero_ps()), _mm_set1_ps(VoxelData::kColourUnit)), _mm_set1_ps(0.5f)),
+      _mm_set1_ps(65535.0f));
+  return _mm_cvttps_epi32(f);
+}
+
 // The three channels in the lanes of one register: the same float products and sums as
 // blend_colour_scalar lane by lane (so the same bits), without its branches; this runs for every
 // contribution.
@@ -92,12 +101,8 @@ inline void blend_colour(VoxelData& v, float before, float weight, const std::ui
   const __m128 c = _mm_cvtepi32_ps(_mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(bytes), zero), zero));
   const __m128 blended =
       _mm_mul_ps(_mm_add_ps(_mm_mul_ps(_mm_set1_ps(before), mean), _mm_mul_ps(_mm_set1_ps(weight), c)), _mm_set1_ps(inv));
-  // colour_to_fixed per lane: max clamps a NaN or -0 to 0 (then 0.5 truncates to 0, as !(c > 0)
-  // gives), min saturates at 65535; u16 from i32 without SSE4.1: bias to i16, pack, unbias.
-  const __m128 f = _mm_min_ps(_mm_add_ps(_mm_mul_ps(_mm_max_ps(blended, _mm_setzero_ps()), _mm_set1_ps(VoxelData::kColourUnit)),
-                                         _mm_set1_ps(0.5f)),
-                              _mm_set1_ps(65535.0f));
-  const __m128i biased = _mm_sub_epi32(_mm_cvttps_epi32(f), _mm_set1_epi32(32768));
+  // u16 from i32 without SSE4.1: bias to i16, pack, unbias.
+  const __m128i biased = _mm_sub_epi32(colour_to_fixed_lanes(blended), _mm_set1_epi32(32768));
   const __m128i u16 = _mm_xor_si128(_mm_packs_epi32(biased, biased), _mm_set1_epi16(std::int16_t(-32768)));
   const std::uint64_t out = std::uint64_t(_mm_cvtsi128_si64(u16));
   std::memcpy(v.colour_fixed, &out, sizeof v.colour_fixed);
@@ -150,7 +155,7 @@ inline void accumulate4(VoxelData* const v[4], const float distance[4], const fl
   const __m128 before = _mm_and_ps(has, _mm_or_ps(_mm_and_ps(full, r1), _mm_andnot_ps(full, scaled)));
   const __m128 Wc = _mm_add_ps(before, w);
   const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), Wc);
-  // blend_colour per channel: (before mean + weight c) inv, then colour_to_fixed as there.
+  // blend_colour per channel: (before mean + weight c) inv, then colour_to_fixed_lanes.
   alignas(16) std::int32_t c[3][4];
   for (int lane = 0; lane < 4; ++lane)
     for (int k = 0; k < 3; ++k) c[k][lane] = colour[lane][k];
@@ -162,10 +167,7 @@ inline void accumulate4(VoxelData* const v[4], const float distance[4], const fl
     const __m128 blended = _mm_mul_ps(
         _mm_add_ps(_mm_mul_ps(before, mean), _mm_mul_ps(w, _mm_cvtepi32_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(c[k]))))),
         inv);
-    const __m128 f = _mm_min_ps(_mm_add_ps(_mm_mul_ps(_mm_max_ps(blended, zero), _mm_set1_ps(VoxelData::kColourUnit)),
-                                           _mm_set1_ps(0.5f)),
-                                _mm_set1_ps(65535.0f));
-    fixed[k] = _mm_cvttps_epi32(f);
+    fixed[k] = colour_to_fixed_lanes(blended);
   }
   // colour_share: full where Wc >= W, else share_of(Wc, W) in double (lane by lane, rare).
   __m128i share_out = _mm_set1_epi32(VoxelData::kFullShare);
