@@ -9,10 +9,24 @@ namespace sf {
 // exceeding the triangle footprint / lambda:  l_T = ceil(log2(root_size * lambda / F_tri)).
 // Clamped to [0, max_level]. A ratio within 1e-6 (relative) of a power of two counts as that power,
 // so that footprints stored in float do not flip a level.
-inline int triangle_level(double root_size, double lambda, double footprint, int max_level) {
+// The formula itself, with log2 (the reference for triangle_level's shortcut, and its fallback).
+inline int triangle_level_log2(double root_size, double lambda, double footprint, int max_level) {
   const double l = std::ceil(std::log2(root_size * lambda / footprint) - 1.5e-6);
   if (!(l > 0)) return 0;
   return int(std::min<double>(l, max_level));
+}
+
+// The same level without a log2 per triangle (run for every triangle of every read of a frame):
+// with ratio = m 2^e, m in [0.5, 1), log2(ratio) = e + log2(m). Unless m lies within 1e-5 of 0.5
+// or 1, log2(m) stays more than 1.4e-5 from -1 and from 0, far beyond log2's rounding and the
+// 1.5e-6 tolerance, so the ceiling is e; near a power of two the formula decides.
+inline int triangle_level(double root_size, double lambda, double footprint, int max_level) {
+  const double ratio = root_size * lambda / footprint;
+  int e = 0;
+  const double m = std::frexp(ratio, &e);
+  if (!(m > 0.50001 && m < 0.99999)) return triangle_level_log2(root_size, lambda, footprint, max_level);
+  if (e <= 0) return 0;
+  return std::min(e, max_level);
 }
 
 // The ramp length of a level: gamma times its cell size.

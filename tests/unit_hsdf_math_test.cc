@@ -3,6 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <random>
+
 #include "engine/fusion.h"
 #include "engine/triangulate.h"
 #include "storage/voxel_table.h"
@@ -21,6 +24,25 @@ TEST(Equation1, LevelIsCeilOfLog2OfRootOverFootprint) {
   // Footprint larger than the root: level 0; tiny footprint: clamped to the deepest level.
   EXPECT_EQ(triangle_level(1.0, 1.0, 5.0, 18), 0);
   EXPECT_EQ(triangle_level(1.0, 1.0, 1e-9, 18), 18);
+}
+
+TEST(Equation1, ExponentShortcutEqualsTheLog2Formula) {
+  // triangle_level reads the level off the ratio's exponent unless the ratio lies near a power of
+  // two; it must agree with the formula everywhere: log-uniform ratios over 2^-30..2^40, and
+  // ratios within 1e-4 (relative) of every power of two, on both sides, where it defers.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> exponent(-30.0, 40.0), near(-1e-4, 1e-4);
+  for (int i = 0; i < 400000; ++i) {
+    const double ratio = i % 2 ? std::exp2(exponent(rng)) : std::ldexp(1.0 + near(rng), int(exponent(rng)));
+    const double root = 3.7, lambda = i % 3 ? 1.0 : 2.0, footprint = root * lambda / ratio;
+    ASSERT_EQ(triangle_level(root, lambda, footprint, 18), triangle_level_log2(root, lambda, footprint, 18))
+        << "footprint " << footprint;
+  }
+  // Exact powers of two and their float neighbours (footprints stored in float).
+  for (int k = -20; k <= 30; ++k)
+    for (float f : {std::ldexp(1.0f, -k), std::nextafter(std::ldexp(1.0f, -k), 0.0f),
+                    std::nextafter(std::ldexp(1.0f, -k), 1e30f)})
+      EXPECT_EQ(triangle_level(1.0, 1.0, f, 18), triangle_level_log2(1.0, 1.0, f, 18)) << f;
 }
 
 TEST(BrickLevel, AutoIsTheFinestLevelMinus8Clamped) {
