@@ -41,11 +41,19 @@ std::optional<std::string> huge_page_tunables(const char* tunables, std::string_
   if (!huge && transparent_hugepage.find("[never]") == std::string_view::npos) return std::nullopt;
   if (!has_hugetlb_tunable(libc_version)) return std::nullopt;
   const std::string_view current = tunables ? tunables : "";
-  if (current.find(kTunable) != std::string_view::npos) return std::nullopt;
   std::string value(current);
-  if (!value.empty()) value += ':';
-  value += kTunable;
-  value += huge ? "=1" : "=0";  // 0: nothing to ask for, but it marks the re-execution as done
+  if (current.find(kTunable) != std::string_view::npos) {
+    // The user's choice (hugetlb=0 where fresh 2 MiB pages cost more than they save, as on a
+    // virtual machine whose host takes freed memory back: bench/README.md, session 39), or this
+    // process's own re-execution: the heap tunables still apply, unless they are all set already.
+    bool all = true;
+    for (const auto& [name, setting] : kHeapTunables) all = all && current.find(name) != std::string_view::npos;
+    if (all) return std::nullopt;
+  } else {
+    if (!value.empty()) value += ':';
+    value += kTunable;
+    value += huge ? "=1" : "=0";  // 0: nothing to ask for, but it marks the re-execution as done
+  }
   for (const auto& [name, setting] : kHeapTunables) {
     if (current.find(name) != std::string_view::npos) continue;  // the user's
     value += ':';

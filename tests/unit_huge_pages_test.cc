@@ -20,7 +20,8 @@ TEST(HugePages, SetsTheHeapsInEveryTransparentHugePageMode) {
   EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]\n", "2.36"),
             "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim);
   EXPECT_EQ(huge_page_tunables(nullptr, "", "2.36"), std::nullopt);  // no mode read
-  EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0", "always madvise [never]", "2.36"), std::nullopt);
+  EXPECT_EQ(huge_page_tunables(("glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim).c_str(), "always madvise [never]", "2.36"),
+            std::nullopt);
 }
 
 TEST(HugePages, NeedsAGlibcThatKnowsTheTunable) {
@@ -39,7 +40,19 @@ TEST(HugePages, KeepsTheUsersTunablesAndNeverLoops) {
             "glibc.malloc.top_pad=0:glibc.malloc.hugetlb=1" + kMmap + kTrim);
   EXPECT_EQ(huge_page_tunables("glibc.malloc.trim_threshold=1:glibc.malloc.mmap_threshold=2", "always [madvise] never", "2.36"),
             "glibc.malloc.trim_threshold=1:glibc.malloc.mmap_threshold=2:glibc.malloc.hugetlb=1" + kPad);
-  // Set already, by the user (0 = no) or by the re-execution itself.
-  EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0", "always [madvise] never", "2.36"), std::nullopt);
-  EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=1", "always [madvise] never", "2.36"), std::nullopt);
+  // hugetlb set by the user (0 = no huge pages) keeps their choice and still gets the heap
+  // tunables it lacks; once all are set (the re-execution's own environment) nothing changes.
+  EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0", "always [madvise] never", "2.36"),
+            "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim);
+  EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0:glibc.malloc.top_pad=0", "always [madvise] never", "2.36"),
+            "glibc.malloc.hugetlb=0:glibc.malloc.top_pad=0" + kMmap + kTrim);
+  EXPECT_EQ(huge_page_tunables(kAll.c_str(), "always [madvise] never", "2.36"), std::nullopt);
+  const std::string no_huge = "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim;
+  EXPECT_EQ(huge_page_tunables(no_huge.c_str(), "always [madvise] never", "2.36"), std::nullopt);
+  // Whatever the start, the value returned is a fixed point: a second start re-executes no more.
+  for (const char* start : {"", "glibc.malloc.hugetlb=0", "glibc.malloc.trim_threshold=5", "glibc.malloc.arena_max=1"}) {
+    const std::optional<std::string> once = huge_page_tunables(start, "always [madvise] never", "2.36");
+    ASSERT_TRUE(once.has_value()) << start;
+    EXPECT_EQ(huge_page_tunables(once->c_str(), "always [madvise] never", "2.36"), std::nullopt) << start;
+  }
 }
