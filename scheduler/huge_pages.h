@@ -27,9 +27,10 @@ namespace sf {
 // only to ranges a heap has grown over whole, so the heap tunables matter there too: igea at 2
 // threads took 67 k faults without them, 10 k with; "never" gives none, so hugetlb=0 there, but
 // the heap tunables still spare faults: 104 k -> 77 k), `libc_version` glibc's (hugetlb exists
-// from 2.35), `tunables` the current GLIBC_TUNABLES (null if unset; one that already sets
-// glibc.malloc.hugetlb is the user's choice, or this process's own re-execution, and is kept, as
-// is any heap tunable it sets).
+// from 2.35), `tunables` the current GLIBC_TUNABLES (null if unset). Every tunable it sets is
+// kept: glibc.malloc.hugetlb set there is the user's choice (0 on a virtual machine whose host
+// backs fresh 2 MiB pages slowly: bench/README.md, session 39), and the heap tunables it lacks are
+// still added; nullopt once hugetlb and all three are set, as in the re-executed process itself.
 std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
                                               std::string_view libc_version);
 
