@@ -731,15 +731,15 @@ struct ItemBatch {
   }
 };
 
-// Phase 1 of the kernel for one column: the voxels ia in [i0, i1] (centre `base` moved by h ia
+// Phase 1 of the kernel for one column (ib, ic): the voxels ia in [i0, i1] (centre `base` moved by h ia
 // along axis `ax`) whose projection falls in the tile's quads [c0, c1) x [r0, r1) join the batch
 // from index n; returns the new count. `terms` holds the column's fixed axes' camera terms.
 struct ColumnTile {
   int c0, c1, r0, r1;  // the tile's pixel quads
 };
 [[maybe_unused]] std::size_t project_column_scalar(const Sensor& sensor, double terms[3][3], const Vector3d& base,
-                                                   int ax, double h, std::int64_t i0, std::int64_t i1, std::int64_t ic,
-                                                   ColumnTile t, ItemBatch& batch, std::size_t n) {
+                                                   int ax, double h, std::int64_t i0, std::int64_t i1, std::int64_t ib,
+                                                   std::int64_t ic, ColumnTile t, ItemBatch& batch, std::size_t n) {
   for (std::int64_t ia = i0; ia <= i1; ++ia) {
     Vector3d X = base;
     X[ax] += h * double(ia);
@@ -753,7 +753,7 @@ struct ColumnTile {
     cand.X = X;
     cand.q = q;
     cand.col = col, cand.row = row;
-    cand.ia = std::int32_t(ia), cand.ic = std::int32_t(ic);
+    cand.ia = std::int32_t(ia), cand.ib = std::int32_t(ib), cand.ic = std::int32_t(ic);
   }
   return n;
 }
@@ -765,7 +765,7 @@ struct ColumnTile {
 // the batch and the count moves past those kept, so the batch needs room for one more.
 template <int AX>
 std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3], const Vector3d& base, double h,
-                                 std::int64_t i0, std::int64_t i1, std::int64_t ic, ColumnTile t, ItemBatch& batch,
+                                 std::int64_t i0, std::int64_t i1, std::int64_t ib, std::int64_t ic, ColumnTile t, ItemBatch& batch,
                                  std::size_t n) {
   constexpr int B = (AX + 1) % 3, C = (AX + 2) % 3;
   // Per camera coordinate i: the lanes' term v = R(i, AX) X[AX], then s = v + k1, s = s + k2 (if
@@ -826,7 +826,7 @@ std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3],
       cand.X[C] = base[C];
       _mm_storeu_pd(cand.q.data(), q);
       _mm_storel_epi64(reinterpret_cast<__m128i*>(&cand.col), lane == 0 ? colrow : _mm_srli_si128(colrow, 8));
-      cand.ia = std::int32_t(ia + lane), cand.ic = std::int32_t(ic);
+      cand.ia = std::int32_t(ia + lane), cand.ib = std::int32_t(ib), cand.ic = std::int32_t(ic);
       n += std::size_t(keep >> lane & 1);
     }
   }
@@ -835,14 +835,14 @@ std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3],
 #endif
 
 std::size_t project_column(const Sensor& sensor, double terms[3][3], const Vector3d& base, int ax, double h,
-                           std::int64_t i0, std::int64_t i1, std::int64_t ic, ColumnTile t, ItemBatch& batch,
+                           std::int64_t i0, std::int64_t i1, std::int64_t ib, std::int64_t ic, ColumnTile t, ItemBatch& batch,
                            std::size_t n) {
 #if defined(__SSE2__) && defined(__x86_64__)
-  if (ax == 0) return project_column_pairs<0>(sensor, terms, base, h, i0, i1, ic, t, batch, n);
-  if (ax == 1) return project_column_pairs<1>(sensor, terms, base, h, i0, i1, ic, t, batch, n);
-  return project_column_pairs<2>(sensor, terms, base, h, i0, i1, ic, t, batch, n);
+  if (ax == 0) return project_column_pairs<0>(sensor, terms, base, h, i0, i1, ib, ic, t, batch, n);
+  if (ax == 1) return project_column_pairs<1>(sensor, terms, base, h, i0, i1, ib, ic, t, batch, n);
+  return project_column_pairs<2>(sensor, terms, base, h, i0, i1, ib, ic, t, batch, n);
 #else
-  return project_column_scalar(sensor, terms, base, ax, h, i0, i1, ic, t, batch, n);
+  return project_column_scalar(sensor, terms, base, ax, h, i0, i1, ib, ic, t, batch, n);
 #endif
 }
 
@@ -1124,9 +1124,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             if (i1 >= i0 && n + std::size_t(i1 - i0 + 2) > batch.size()) batch.grow(n + std::size_t(i1 - i0 + 2), n);
             // Phase 1: project; keep the voxels whose quad is this tile's.
             if (i1 < i0) continue;
-            const std::size_t column_start = n;
-            n = project_column(sensor, terms, base, ax, h, i0, i1, ic, ColumnTile{c0, c1, r0, r1}, batch, n);
-            for (std::size_t k = column_start; k < n; ++k) batch.cand[k].ib = std::int32_t(ib);
+            n = project_column(sensor, terms, base, ax, h, i0, i1, ib, ic, ColumnTile{c0, c1, r0, r1}, batch, n);
           }
         }
         {
