@@ -763,9 +763,22 @@ struct ColumnTile {
 // the same order (camera_point's sums grouped as there, with the column's own term in its place
 // among the three), so the same bits, in about half the instructions. Both lanes are written to
 // the batch and the count moves past those kept, so the batch needs room for one more.
+// What project_column_pairs needs of an item, in lanes: set once per item rather than once per
+// column (an item has some 20 columns of 3 or 4 candidates each).
+struct ColumnLanes {
+  __m128d hv, r[3], tt[3], fx, fy, cx, cy;
+  __m128i c0, c1, r0, r1;  // the tile's quads, the lower bounds less one
+  ColumnLanes(const Sensor& sensor, int ax, double h, ColumnTile t) {
+    hv = _mm_set1_pd(h);
+    for (int i = 0; i < 3; ++i) r[i] = _mm_set1_pd(sensor.R(i, ax)), tt[i] = _mm_set1_pd(sensor.t[i]);
+    fx = _mm_set1_pd(sensor.fx), fy = _mm_set1_pd(sensor.fy), cx = _mm_set1_pd(sensor.cx), cy = _mm_set1_pd(sensor.cy);
+    c0 = _mm_set1_epi32(t.c0 - 1), c1 = _mm_set1_epi32(t.c1), r0 = _mm_set1_epi32(t.r0 - 1), r1 = _mm_set1_epi32(t.r1);
+  }
+};
+
 template <int AX>
-std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3], const Vector3d& base, double h,
-                                 std::int64_t i0, std::int64_t i1, std::int64_t ib, std::int64_t ic, ColumnTile t, ItemBatch& batch,
+std::size_t project_column_pairs(const ColumnLanes& lanes, const double terms[3][3], const Vector3d& base,
+                                 std::int64_t i0, std::int64_t i1, std::int64_t ib, std::int64_t ic, ItemBatch& batch,
                                  std::size_t n) {
   constexpr int B = (AX + 1) % 3, C = (AX + 2) % 3;
   // Per camera coordinate i: the lanes' term v = R(i, AX) X[AX], then s = v + k1, s = s + k2 (if
@@ -781,18 +794,17 @@ std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3],
   if (AX == 0) k1[2] = terms[1][2] + terms[2][2], k2[2] = 0, has_k2[2] = false;  // (v + (T1 + T2))
   if (AX == 1) k1[2] = terms[2][2], k2[2] = terms[0][2], has_k2[2] = true;       // (T0 + (v + T2))
   if (AX == 2) k1[2] = terms[1][2], k2[2] = terms[0][2], has_k2[2] = true;       // (T0 + (T1 + v))
-  const __m128d hv = _mm_set1_pd(h), base_a = _mm_set1_pd(base[AX]);
-  __m128d r[3], kk1[3], kk2[3], tt[3];
+  const __m128d base_a = _mm_set1_pd(base[AX]);
+  __m128d kk1[3], kk2[3];
   for (int i = 0; i < 3; ++i) {
-    r[i] = _mm_set1_pd(sensor.R(i, AX));
     kk1[i] = _mm_set1_pd(k1[i]);
     kk2[i] = _mm_set1_pd(k2[i]);
-    tt[i] = _mm_set1_pd(sensor.t[i]);
   }
-  const __m128d fx = _mm_set1_pd(sensor.fx), fy = _mm_set1_pd(sensor.fy), cx = _mm_set1_pd(sensor.cx),
-                cy = _mm_set1_pd(sensor.cy), one = _mm_set1_pd(1.0), half = _mm_set1_pd(0.5);
-  const __m128i c0 = _mm_set1_epi32(t.c0 - 1), c1 = _mm_set1_epi32(t.c1), r0 = _mm_set1_epi32(t.r0 - 1),
-                r1 = _mm_set1_epi32(t.r1);
+  const __m128d hv = lanes.hv, fx = lanes.fx, fy = lanes.fy, cx = lanes.cx, cy = lanes.cy, one = _mm_set1_pd(1.0),
+                half = _mm_set1_pd(0.5);
+  const __m128d* const r = lanes.r;
+  const __m128d* const tt = lanes.tt;
+  const __m128i c0 = lanes.c0, c1 = lanes.c1, r0 = lanes.r0, r1 = lanes.r1;
   // fast_floor per lane: truncate, and one less where that rounded up.
   auto floor_lanes = [](__m128d x) {
     const __m128i i = _mm_cvttpd_epi32(x);  // lanes 0, 1
@@ -834,17 +846,31 @@ std::size_t project_column_pairs(const Sensor& sensor, const double terms[3][3],
 }
 #endif
 
-std::size_t project_column(const Sensor& sensor, double terms[3][3], const Vector3d& base, int ax, double h,
-                           std::int64_t i0, std::int64_t i1, std::int64_t ib, std::int64_t ic, ColumnTile t, ItemBatch& batch,
-                           std::size_t n) {
 #if defined(__SSE2__) && defined(__x86_64__)
-  if (ax == 0) return project_column_pairs<0>(sensor, terms, base, h, i0, i1, ib, ic, t, batch, n);
-  if (ax == 1) return project_column_pairs<1>(sensor, terms, base, h, i0, i1, ib, ic, t, batch, n);
-  return project_column_pairs<2>(sensor, terms, base, h, i0, i1, ib, ic, t, batch, n);
+struct ColumnProjector {
+  ColumnLanes lanes;
+  int ax;
+  ColumnProjector(const Sensor& sensor, int ax, double h, ColumnTile t) : lanes(sensor, ax, h, t), ax(ax) {}
+  std::size_t operator()(double terms[3][3], const Vector3d& base, std::int64_t i0, std::int64_t i1, std::int64_t ib,
+                         std::int64_t ic, ItemBatch& batch, std::size_t n) const {
+    if (ax == 0) return project_column_pairs<0>(lanes, terms, base, i0, i1, ib, ic, batch, n);
+    if (ax == 1) return project_column_pairs<1>(lanes, terms, base, i0, i1, ib, ic, batch, n);
+    return project_column_pairs<2>(lanes, terms, base, i0, i1, ib, ic, batch, n);
+  }
+};
 #else
-  return project_column_scalar(sensor, terms, base, ax, h, i0, i1, ib, ic, t, batch, n);
+struct ColumnProjector {
+  const Sensor& sensor;
+  int ax;
+  double h;
+  ColumnTile t;
+  ColumnProjector(const Sensor& sensor, int ax, double h, ColumnTile t) : sensor(sensor), ax(ax), h(h), t(t) {}
+  std::size_t operator()(double terms[3][3], const Vector3d& base, std::int64_t i0, std::int64_t i1, std::int64_t ib,
+                         std::int64_t ic, ItemBatch& batch, std::size_t n) const {
+    return project_column_scalar(sensor, terms, base, ax, h, i0, i1, ib, ic, t, batch, n);
+  }
+};
 #endif
-}
 
 // Phase 3 of the kernel for the owned candidates of a row: distance, weight and colour
 // (voxel_sample); the candidates that get a contribution are listed in `batch.sampled`, their
@@ -1080,6 +1106,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         }
         ColumnBounds bounds;
         bounds.set_item(cp, lower, n_lower, upper, n_upper);
+        const ColumnProjector project(sensor, ax, h, ColumnTile{c0, c1, r0, r1});
         // Blocks of this level: 2^log voxels per axis, x fastest (VoxelTable); phase 4 below
         // finds a voxel in its block by these offsets.
         const int log = block_log(level, brick_level);
@@ -1124,7 +1151,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             if (i1 >= i0 && n + std::size_t(i1 - i0 + 2) > batch.size()) batch.grow(n + std::size_t(i1 - i0 + 2), n);
             // Phase 1: project; keep the voxels whose quad is this tile's.
             if (i1 < i0) continue;
-            n = project_column(sensor, terms, base, ax, h, i0, i1, ib, ic, ColumnTile{c0, c1, r0, r1}, batch, n);
+            n = project(terms, base, i0, i1, ib, ic, batch, n);
           }
         }
         {
