@@ -110,15 +110,23 @@ struct Ownership {
 };
 
 // The unit normal of triangle (P0, P1, P2), turned to face the sensor; false if degenerate.
-inline bool facing_normal(const Sensor& sensor, const Eigen::Vector3d P[3], Eigen::Vector3d* normal) {
+// `centre` is the sensor's centre (perspective; ignored for orthographic sensors), passed in so
+// that a frame's triangles do not each recompute it. The side is the sign of the normal's dot
+// product with the line of sight to the centroid, which needs no unit line of sight.
+inline bool facing_normal(const Sensor& sensor, const Eigen::Vector3d& centre, const Eigen::Vector3d P[3],
+                          Eigen::Vector3d* normal) {
   Eigen::Vector3d n = (P[1] - P[0]).cross(P[2] - P[0]);
   const double len = n.norm();
   if (!(len > 0)) return false;
   n /= len;
   const Eigen::Vector3d centroid = (P[0] + P[1] + P[2]) / 3.0;
-  if (n.dot(sensor.ray_direction(centroid)) > 0) n = -n;
+  const Eigen::Vector3d sight = sensor.kind == Sensor::Kind::Orthographic ? sensor.axis() : Eigen::Vector3d(centroid - centre);
+  if (n.dot(sight) > 0) n = -n;
   *normal = n;
   return true;
+}
+inline bool facing_normal(const Sensor& sensor, const Eigen::Vector3d P[3], Eigen::Vector3d* normal) {
+  return facing_normal(sensor, sensor.centre(), P, normal);
 }
 
 // The region's bricks in world coordinates, widened a little (for culling triangles that cannot

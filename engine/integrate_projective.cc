@@ -319,6 +319,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     }
   }
 
+  const Vector3d sensor_centre = sensor.centre();
   // The geometry of the triangles this call can evaluate. Their ownership is their quad's shape:
   // its three corners are distinct pixel centres, so its edges never degenerate.
   tbb::parallel_for(tbb::blocked_range<int>(0, QH, 16), [&](const tbb::blocked_range<int>& rows) {
@@ -332,7 +333,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
         Vector3d P[3];
         for (int k = 0; k < 3; ++k) P[k] = frame.position[g.idx[k]].cast<double>();
         g.P0 = frame.position[g.idx[0]];
-        g.ok = facing_normal(sensor, P, &g.normal);
+        g.ok = facing_normal(sensor, sensor_centre, P, &g.normal);
         if (g.ok) qd.shape[slot] |= Quad::kUsable;
       }
       qd.split = split_of(qd, p.shapes);
