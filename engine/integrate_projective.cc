@@ -20,6 +20,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <optional>
 
 #include "engine/integrate.h"
 #include "engine/integrate_kernel.h"
@@ -538,6 +539,9 @@ ItemFrustum item_frustum(const Prepared& p, const RootCube& root, int tile, int 
   }
   return fr;
 }
+
+// Index boxes of up to this many columns go without the row prefilter (below).
+constexpr std::int64_t kPrefilterColumns = 128;
 
 // One half-space of an item's slab along a column (ib, ic) of its lattice: m . X - k =
 // v0 + ib vb + ic vc + t ma, t the position along the column's axis.
@@ -1094,7 +1098,12 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           const double inv_ma = hs.m[ax] != 0 ? 1.0 / hs.m[ax] : 0.0;
           cp[k] = {hs.m.dot(root.min) - hs.k, hs.m[bx] * h, hs.m[cx] * h, hs.m[ax], inv_ma, inv_ma / h};
         }
-        const RowPrefilter prefilter(cp, double(a0 - 1) * h, double(a1 + 1) * h, 1e-6 * h);
+        // The prefilter pays its set-up (every pair of a lower and an upper bound) only where the
+        // index box has columns enough to skip: most items' boxes are a few voxels across, and
+        // their empty columns cost less than the set-up (bench/README.md, session 39).
+        const std::int64_t box_columns = (fr.last[bx] - fr.first[bx] + 1) * (fr.last[cx] - fr.first[cx] + 1);
+        std::optional<RowPrefilter> prefilter;
+        if (box_columns > kPrefilterColumns) prefilter.emplace(cp, double(a0 - 1) * h, double(a1 + 1) * h, 1e-6 * h);
         // The planes by their part in a column's clip: parallel to it, bounding t below, above.
         int parallel[8], lower[8], upper[8], n_parallel = 0, n_lower = 0, n_upper = 0;
         for (int k = 0; k < 8; ++k) {
@@ -1116,7 +1125,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         std::size_t n = 0;  // candidates in the batch
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
           std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
-          if (!prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
+          if (prefilter && !prefilter->clip_row(double(ib), &ic0, &ic1)) continue;
           double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
           for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
           bounds.set_row(cp, row_value);
