@@ -172,6 +172,17 @@ struct Prepared {
   std::vector<std::uint32_t> colour;  // per sample, packed_colour; empty if the frame has none
   double behind = 1;  // IntegrateOptions::behind
   double ramp[L][L];  // insertion_ramp by [level of the triangle][insertion level <= it]
+  // What item_frustum needs of a tile's column (its u range) or row (v range), the same for every
+  // level and for every tile of that column or row: the two side planes of its frustum, as
+  // a_cam (camera) and m = Rt a_cam (world) with a_cam . t, and (u - cx) / fx at both ends and at
+  // the middle. Set per frame, so that an item evaluates none of it.
+  struct FrustumSide {
+    Vector3d a_cam[2], m[2];
+    double a_dot_t[2];
+    double ray[3];  // low end, high end, middle
+  };
+  std::vector<FrustumSide> column_side, row_side;
+  Eigen::Matrix3d Rt;  // the sensor's rotation, transposed
   IntegrateStats stats;  // triangles inserted, per level
 };
 
@@ -256,6 +267,25 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
 
   p.TX = (QW + kTile - 1) / kTile, p.TY = (QH + kTile - 1) / kTile;
   const int TX = p.TX, TY = p.TY;
+  p.Rt = sensor.R.transpose();
+  {
+    // Widened by a thousandth of a pixel; a_cam . x_cam >= 0 on the inner side of each plane.
+    constexpr double pm = 1e-3;
+    auto side = [&](int first, int end, double f, double c, int axis) {
+      Prepared::FrustumSide fs;
+      const double lo = first + 0.5 - pm, hi = end + 0.5 + pm;
+      fs.a_cam[0] = Vector3d::Zero(), fs.a_cam[1] = Vector3d::Zero();
+      fs.a_cam[0][axis] = f, fs.a_cam[0][2] = c - lo;
+      fs.a_cam[1][axis] = -f, fs.a_cam[1][2] = hi - c;
+      for (int k = 0; k < 2; ++k) fs.m[k] = p.Rt * fs.a_cam[k], fs.a_dot_t[k] = fs.a_cam[k].dot(sensor.t);
+      fs.ray[0] = (lo - c) / f, fs.ray[1] = (hi - c) / f, fs.ray[2] = (0.5 * (lo + hi) - c) / f;
+      return fs;
+    };
+    p.column_side.resize(std::size_t(TX));
+    p.row_side.resize(std::size_t(TY));
+    for (int tx = 0; tx < TX; ++tx) p.column_side[tx] = side(tx * kTile, std::min(QW, tx * kTile + kTile), sensor.fx, sensor.cx, 0);
+    for (int ty = 0; ty < TY; ++ty) p.row_side[ty] = side(ty * kTile, std::min(QH, ty * kTile + kTile), sensor.fy, sensor.cy, 1);
+  }
   // The quads of a tile, plus the column to its left and the row above: a voxel on the tile's
   // left or top border may belong to a triangle there (see the owner lookup below).
   auto tile_quads = [&](int tile, int* qr0, int* qr1, int* qc0, int* qc1) {
@@ -495,25 +525,24 @@ struct ItemFrustum {
 
 ItemFrustum item_frustum(const Prepared& p, const RootCube& root, int tile, int level) {
   const Sensor& sensor = p.frame->sensor;
-  const Eigen::Matrix3d Rt = sensor.R.transpose();
+  const Eigen::Matrix3d& Rt = p.Rt;
   ItemFrustum fr;
   const int tx = tile % p.TX, ty = tile / p.TX;
   fr.c0 = tx * kTile, fr.c1 = std::min(p.QW, fr.c0 + kTile), fr.r0 = ty * kTile, fr.r1 = std::min(p.QH, fr.r0 + kTile);
   const TileLevel& tl = p.tile_level(tile, level);
   const double h = root.cell_size(level);
   const double margin = 1e-3 * h;
-  // The tile's frustum slab as half-spaces a . x_cam + b >= 0, moved to world coordinates.
-  const double pm = 1e-3;  // pixels
-  const double u0 = fr.c0 + 0.5 - pm, u1 = fr.c1 + 0.5 + pm, v0 = fr.r0 + 0.5 - pm, v1 = fr.r1 + 0.5 + pm;
+  // The tile's frustum slab as half-spaces a . x_cam + b >= 0, moved to world coordinates: the
+  // four sides from the frame's tables (Prepared::FrustumSide), the depth caps here.
+  const Prepared::FrustumSide &cs = p.column_side[tx], &rs = p.row_side[ty];
   const double zlo = std::max(tl.zmin - tl.ramp - margin, 1e-9), zhi = tl.zmax + p.behind * tl.ramp + margin;
-  const Vector3d a_cam[6] = {{sensor.fx, 0, sensor.cx - u0}, {-sensor.fx, 0, u1 - sensor.cx},
-                             {0, sensor.fy, sensor.cy - v0}, {0, -sensor.fy, v1 - sensor.cy},
-                             {0, 0, 1},                      {0, 0, -1}};
-  const double b_cam[6] = {0, 0, 0, 0, -zlo, zhi};
-  for (int k = 0; k < 6; ++k) {
-    const Vector3d m = Rt * a_cam[k];
-    fr.planes[k] = {m, -(a_cam[k].dot(sensor.t) + b_cam[k])};
+  for (int k = 0; k < 2; ++k) {
+    fr.planes[k] = {cs.m[k], -(cs.a_dot_t[k] + 0.0)};
+    fr.planes[2 + k] = {rs.m[k], -(rs.a_dot_t[k] + 0.0)};
   }
+  const Vector3d a_depth[2] = {{0, 0, 1}, {0, 0, -1}};
+  const double b_depth[2] = {-zlo, zhi};
+  for (int k = 0; k < 2; ++k) fr.planes[4 + k] = {Rt * a_depth[k], -(a_depth[k].dot(sensor.t) + b_depth[k])};
   // Along the tile normal: the prisms lie within the hull of their corners P +- ramp dir,
   // up to the bulge of a perspective cap (ramp x (pixel angle)^2 / 8, far below the margin).
   const Vector3d& tn = p.tile_normal[tile];
@@ -521,15 +550,14 @@ ItemFrustum item_frustum(const Prepared& p, const RootCube& root, int tile, int 
   fr.planes[7] = {-tn, -tl.smax - margin};
   Vector3d lo = Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   for (int k = 0; k < 8; ++k) {
-    const double u = (k & 1) ? u1 : u0, v = (k & 2) ? v1 : v0, z = (k & 4) ? zhi : zlo;
-    const Vector3d xc((u - sensor.cx) / sensor.fx * z, (v - sensor.cy) / sensor.fy * z, z);
+    const double ru = cs.ray[k & 1], rv = rs.ray[(k >> 1) & 1], z = (k & 4) ? zhi : zlo;
+    const Vector3d xc(ru * z, rv * z, z);
     const Vector3d X = Rt * (xc - sensor.t);
     lo = lo.cwiseMin(X);
     hi = hi.cwiseMax(X);
   }
   // March along the world axis closest to the tile's central line of sight.
-  const double uc = 0.5 * (u0 + u1), vc = 0.5 * (v0 + v1);
-  const Vector3d ray = Rt * Vector3d((uc - sensor.cx) / sensor.fx, (vc - sensor.cy) / sensor.fy, 1.0);
+  const Vector3d ray = Rt * Vector3d(cs.ray[2], rs.ray[2], 1.0);
   ray.cwiseAbs().maxCoeff(&fr.ax);
   fr.bx = (fr.ax + 1) % 3, fr.cx = (fr.ax + 2) % 3;
   const std::int64_t n_cells = std::int64_t{1} << level;
@@ -1017,7 +1045,8 @@ std::size_t IntegrateScratch::bytes() const {
   return p.quad.capacity() * sizeof(Quad) + p.tris.capacity() * sizeof(GridTriangle) +
          p.tile_levels.capacity() * sizeof(TileLevel) + p.tile_normal.capacity() * sizeof(Vector3d) +
          p.depth.capacity() * sizeof(double) + p.sight.capacity() * sizeof(Vector3d) +
-         p.colour.capacity() * sizeof(std::uint32_t);
+         p.colour.capacity() * sizeof(std::uint32_t) +
+         (p.column_side.capacity() + p.row_side.capacity()) * sizeof(Prepared::FrustumSide);
 }
 
 bool integrate_frame_projective(const DepthFrame& frame, const std::vector<FrameTriangle>& triangles,
