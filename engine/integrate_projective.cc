@@ -410,14 +410,36 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     if (!tile_active[tile]) return;
     int qr0, qr1, qc0, qc1;
     tile_quads(tile, &qr0, &qr1, &qc0, &qc1);
-    auto for_each_triangle = [&](auto&& f) {
-      for (int r = qr0; r < qr1; ++r)
-        for (int c = qc0; c < qc1; ++c)
-          for (std::int32_t t : p.quad[std::size_t(r) * QW + c].tri)
-            if (t >= 0 && tris[t].ok) f(tris[t]);
-    };
+    constexpr int kSide = kTile + 2;  // vertices per side: the tile's quads and the ones before
+    const int vw = qc1 - qc0 + 1;
+    // One pass over the tile's triangles: the sum of their normals, and per level of equation 1
+    // the vertices of its triangles, a bit each (a vertex is shared by up to six triangles, so
+    // the extents below take each vertex once: min and max do not depend on the order).
+    static_assert(kSide * kSide <= 64, "a tile's vertices fit in one mask");
+    static_assert(L <= 32, "levels_seen holds a bit per level");
+    std::uint64_t used[L];
+    int coarsest_of[L];
+    std::uint32_t levels_seen = 0;  // bit lt: some triangle of level lt
     Vector3d n = Vector3d::Zero();
-    for_each_triangle([&](const GridTriangle& g) { n += g.normal; });
+    for (int r = qr0; r < qr1; ++r)
+      for (int c = qc0; c < qc1; ++c) {
+        const Quad& qd = p.quad[std::size_t(r) * QW + c];
+        for (int slot = 0; slot < 2; ++slot) {
+          if (qd.tri[slot] < 0) continue;
+          const GridTriangle& g = tris[qd.tri[slot]];
+          if (!g.ok) continue;
+          n += g.normal;
+          if (!(levels_seen >> g.level & 1)) {
+            used[g.level] = 0;
+            coarsest_of[g.level] = g.coarsest;
+            levels_seen |= 1u << g.level;
+          }
+          for (int k = 0; k < 3; ++k) {
+            const int corner = (qd.shape[slot] >> (2 * k)) & 3;
+            used[g.level] |= std::uint64_t{1} << ((r - qr0 + (corner >> 1)) * vw + (c - qc0 + (corner & 1)));
+          }
+        }
+      }
     if (!(n.norm() > 1e-6)) n = Vector3d::UnitZ();  // any direction is a valid bound
     n.normalize();
     p.tile_normal[tile] = n;
@@ -429,8 +451,6 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     // plus the least offset below (the greatest plus the greatest above) over all the triangles
     // of one level of equation 1 at once: looser than per triangle by the ramp times the spread of
     // the tile's lines of sight (a few pixels' angle), which the margins dwarf.
-    constexpr int kSide = kTile + 2;  // vertices per side: the tile's quads and the ones before
-    const int vw = qc1 - qc0 + 1;
     double vz[kSide * kSide], vs[kSide * kSide], vbelow[kSide * kSide], vabove[kSide * kSide];
     for (int r = qr0; r <= qr1; ++r)
       for (int c = qc0; c <= qc1; ++c) {
@@ -446,32 +466,6 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       double zmin, zmax, smin, smax, below, above;
       int coarsest;  // the same for every triangle of one level of equation 1
     };
-    // Per level of equation 1, the vertices of its triangles, a bit each: a vertex is shared by up
-    // to six triangles, so the extents then take each vertex once (min and max do not depend on
-    // the order) rather than once per triangle.
-    static_assert(kSide * kSide <= 64, "a tile's vertices fit in one mask");
-    static_assert(L <= 32, "levels_seen holds a bit per level");
-    std::uint64_t used[L];
-    int coarsest_of[L];
-    std::uint32_t levels_seen = 0;  // bit lt: some triangle of level lt
-    for (int r = qr0; r < qr1; ++r)
-      for (int c = qc0; c < qc1; ++c) {
-        const Quad& qd = p.quad[std::size_t(r) * QW + c];
-        for (int slot = 0; slot < 2; ++slot) {
-          if (qd.tri[slot] < 0) continue;
-          const GridTriangle& g = tris[qd.tri[slot]];
-          if (!g.ok) continue;
-          if (!(levels_seen >> g.level & 1)) {
-            used[g.level] = 0;
-            coarsest_of[g.level] = g.coarsest;
-            levels_seen |= 1u << g.level;
-          }
-          for (int k = 0; k < 3; ++k) {
-            const int corner = (qd.shape[slot] >> (2 * k)) & 3;
-            used[g.level] |= std::uint64_t{1} << ((r - qr0 + (corner >> 1)) * vw + (c - qc0 + (corner & 1)));
-          }
-        }
-      }
     Extent extent[L];
     for (int lt = 0; lt < L; ++lt) {
       if (!(levels_seen >> lt & 1)) continue;
