@@ -120,7 +120,8 @@ inline bool facing_normal(const Sensor& sensor, const Eigen::Vector3d& centre, c
   if (!(len > 0)) return false;
   n /= len;
   const Eigen::Vector3d centroid = (P[0] + P[1] + P[2]) / 3.0;
-  const Eigen::Vector3d sight = sensor.kind == Sensor::Kind::Orthographic ? sensor.axis() : Eigen::Vector3d(centroid - centre);
+  const Eigen::Vector3d sight =
+      sensor.kind == Sensor::Kind::Orthographic ? sensor.axis() : Eigen::Vector3d(centroid - centre);
   if (n.dot(sight) > 0) n = -n;
   *normal = n;
   return true;

@@ -173,13 +173,12 @@ struct Prepared {
   double behind = 1;  // IntegrateOptions::behind
   double ramp[L][L];  // insertion_ramp by [level of the triangle][insertion level <= it]
   // What item_frustum needs of a tile's column (its u range) or row (v range), the same for every
-  // level and for every tile of that column or row: the two side planes of its frustum, as
-  // a_cam (camera) and m = Rt a_cam (world) with a_cam . t, and (u - cx) / fx at both ends and at
-  // the middle. Set per frame, so that an item evaluates none of it.
+  // level and for every tile of that column or row: the two side planes of its frustum in world
+  // coordinates, and (u - cx) / fx at both ends and at the middle. Set per frame, so that an
+  // item evaluates none of it.
   struct FrustumSide {
-    Vector3d a_cam[2], m[2];
-    double a_dot_t[2];
-    double ray[3];  // low end, high end, middle
+    HalfSpace side[2];  // low end, high end
+    double ray[3];      // low end, high end, middle
   };
   std::vector<FrustumSide> column_side, row_side;
   Eigen::Matrix3d Rt;  // the sensor's rotation, transposed
@@ -269,22 +268,26 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   const int TX = p.TX, TY = p.TY;
   p.Rt = sensor.R.transpose();
   {
-    // Widened by a thousandth of a pixel; a_cam . x_cam >= 0 on the inner side of each plane.
+    // The sides of the quads [first, end) along image axis `axis` (focal length f, principal
+    // point c), widened by a thousandth of a pixel: half-spaces a . x_cam >= 0 in the camera,
+    // a = (f, -(lo - c)) and (-f, hi - c) in that axis and depth, moved to world coordinates.
     constexpr double pm = 1e-3;
-    auto side = [&](int first, int end, double f, double c, int axis) {
+    auto sides = [&](int first, int end, double f, double c, int axis) {
       Prepared::FrustumSide fs;
       const double lo = first + 0.5 - pm, hi = end + 0.5 + pm;
-      fs.a_cam[0] = Vector3d::Zero(), fs.a_cam[1] = Vector3d::Zero();
-      fs.a_cam[0][axis] = f, fs.a_cam[0][2] = c - lo;
-      fs.a_cam[1][axis] = -f, fs.a_cam[1][2] = hi - c;
-      for (int k = 0; k < 2; ++k) fs.m[k] = p.Rt * fs.a_cam[k], fs.a_dot_t[k] = fs.a_cam[k].dot(sensor.t);
+      Vector3d a[2] = {Vector3d::Zero(), Vector3d::Zero()};
+      a[0][axis] = f, a[0][2] = c - lo;
+      a[1][axis] = -f, a[1][2] = hi - c;
+      for (int k = 0; k < 2; ++k) fs.side[k] = {p.Rt * a[k], -a[k].dot(sensor.t)};
       fs.ray[0] = (lo - c) / f, fs.ray[1] = (hi - c) / f, fs.ray[2] = (0.5 * (lo + hi) - c) / f;
       return fs;
     };
     p.column_side.resize(std::size_t(TX));
     p.row_side.resize(std::size_t(TY));
-    for (int tx = 0; tx < TX; ++tx) p.column_side[tx] = side(tx * kTile, std::min(QW, tx * kTile + kTile), sensor.fx, sensor.cx, 0);
-    for (int ty = 0; ty < TY; ++ty) p.row_side[ty] = side(ty * kTile, std::min(QH, ty * kTile + kTile), sensor.fy, sensor.cy, 1);
+    for (int tx = 0; tx < TX; ++tx)
+      p.column_side[tx] = sides(tx * kTile, std::min(QW, tx * kTile + kTile), sensor.fx, sensor.cx, 0);
+    for (int ty = 0; ty < TY; ++ty)
+      p.row_side[ty] = sides(ty * kTile, std::min(QH, ty * kTile + kTile), sensor.fy, sensor.cy, 1);
   }
   // The quads of a tile, plus the column to its left and the row above: a voxel on the tile's
   // left or top border may belong to a triangle there (see the owner lookup below).
@@ -530,10 +533,7 @@ ItemFrustum item_frustum(const Prepared& p, const RootCube& root, int tile, int 
   // four sides from the frame's tables (Prepared::FrustumSide), the depth caps here.
   const Prepared::FrustumSide &cs = p.column_side[tx], &rs = p.row_side[ty];
   const double zlo = std::max(tl.zmin - tl.ramp - margin, 1e-9), zhi = tl.zmax + p.behind * tl.ramp + margin;
-  for (int k = 0; k < 2; ++k) {
-    fr.planes[k] = {cs.m[k], -(cs.a_dot_t[k] + 0.0)};
-    fr.planes[2 + k] = {rs.m[k], -(rs.a_dot_t[k] + 0.0)};
-  }
+  for (int k = 0; k < 2; ++k) fr.planes[k] = cs.side[k], fr.planes[2 + k] = rs.side[k];
   const Vector3d a_depth[2] = {{0, 0, 1}, {0, 0, -1}};
   const double b_depth[2] = {-zlo, zhi};
   for (int k = 0; k < 2; ++k) fr.planes[4 + k] = {Rt * a_depth[k], -(a_depth[k].dot(sensor.t) + b_depth[k])};

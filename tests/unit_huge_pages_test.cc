@@ -20,8 +20,8 @@ TEST(HugePages, SetsTheHeapsInEveryTransparentHugePageMode) {
   EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]\n", "2.36"),
             "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim);
   EXPECT_EQ(huge_page_tunables(nullptr, "", "2.36"), std::nullopt);  // no mode read
-  EXPECT_EQ(huge_page_tunables(("glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim).c_str(), "always madvise [never]", "2.36"),
-            std::nullopt);
+  const std::string set_already = "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim;
+  EXPECT_EQ(huge_page_tunables(set_already.c_str(), "always madvise [never]", "2.36"), std::nullopt);
 }
 
 TEST(HugePages, NeedsAGlibcThatKnowsTheTunable) {
