@@ -353,7 +353,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     }
   }
 
-  const Vector3d sensor_centre = sensor.centre();
+  const Vector3d centre = sensor.centre();
   // The geometry of the triangles this call can evaluate. Their ownership is their quad's shape:
   // its three corners are distinct pixel centres, so its edges never degenerate.
   tbb::parallel_for(tbb::blocked_range<int>(0, QH, 16), [&](const tbb::blocked_range<int>& rows) {
@@ -367,7 +367,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
         Vector3d P[3];
         for (int k = 0; k < 3; ++k) P[k] = frame.position[g.idx[k]].cast<double>();
         g.P0 = frame.position[g.idx[0]];
-        g.ok = facing_normal(sensor, sensor_centre, P, &g.normal);
+        g.ok = facing_normal(sensor, centre, P, &g.normal);
         if (g.ok) qd.shape[slot] |= Quad::kUsable;
       }
       qd.split = split_of(qd, p.shapes);
@@ -385,7 +385,6 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   p.tile_levels.assign(std::size_t(TX) * TY * std::size_t(p.levels), TileLevel{});
   p.tile_normal.assign(std::size_t(TX) * TY, Vector3d::Zero());
   const Eigen::Matrix3d& R = sensor.R;
-  const Vector3d centre = sensor.centre();
   const int H = frame.height;
   p.depth.resize(frame.size());
   p.sight.resize(frame.size());
@@ -744,8 +743,7 @@ struct Candidate {
 struct ItemBatch {
   std::unique_ptr<Candidate[]> cand;
   std::unique_ptr<std::uint32_t[]> owned, sampled;
-  std::size_t capacity = 0;
-  std::size_t size() const { return capacity; }
+  std::size_t capacity = 0;  // elements of each array
   // Room for at least n candidates, keeping the first `used`.
   void grow(std::size_t n, std::size_t used) {
     const std::size_t c = std::max<std::size_t>(2 * n, 256);
@@ -1181,7 +1179,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             camera_terms(R, base, bx, terms);
             camera_terms(R, base, cx, terms);
             // Room for every voxel of the column and one more (project_column_pairs).
-            if (i1 >= i0 && n + std::size_t(i1 - i0 + 2) > batch.size()) batch.grow(n + std::size_t(i1 - i0 + 2), n);
+            if (i1 >= i0 && n + std::size_t(i1 - i0 + 2) > batch.capacity) batch.grow(n + std::size_t(i1 - i0 + 2), n);
             // Phase 1: project; keep the voxels whose quad is this tile's.
             if (i1 < i0) continue;
             n = project(terms, base, i0, i1, ib, ic, batch, n);
