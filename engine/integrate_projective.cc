@@ -15,6 +15,7 @@
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <bit>
 #include <cmath>
@@ -135,6 +136,27 @@ bool is_pixel_centre(const DepthFrame& f, std::uint32_t i, int r, int c) {
   return p.x() == float(c) + 0.5f && p.y() == float(r) + 0.5f;
 }
 
+// Whether exactly the valid samples lie at their pixel centres (as fill_perspective_samples
+// leaves them: an invalid sample's image position is zero). Then is_pixel_centre is the sample's
+// validity, a byte, and prepare checks each frame's positions once instead of each triangle's
+// three vertices' (every sample is a vertex of up to six triangles).
+bool centred_where_valid(const DepthFrame& f) {
+  if (f.image_pos.size() != f.size() || f.valid.size() != f.size()) return false;
+  const float* pos = f.image_pos.data()->data();
+  for (int r = 0; r < f.height; ++r) {
+    const float y = float(r) + 0.5f;
+    const std::size_t row = std::size_t(r) * std::size_t(f.width);
+    bool same = true;  // no early exit within a row, so that the loop has no unpredictable branch
+    for (int c = 0; c < f.width; ++c) {
+      const std::size_t i = row + std::size_t(c);
+      const bool centred = pos[2 * i] == float(c) + 0.5f && pos[2 * i + 1] == y;
+      same &= centred == (f.valid[i] != 0);
+    }
+    if (!same) return false;
+  }
+  return true;
+}
+
 // The brick holding world position X (clamped to the grid).
 BrickCoord brick_at(const RootCube& root, int brick_level, const Vector3d& X) {
   const double bs = root.cell_size(brick_level);
@@ -185,11 +207,20 @@ struct Prepared {
   IntegrateStats stats;  // triangles inserted, per level
 };
 
-// The corners of a quad triangle's shape code, one bit each.
-unsigned corners_of(std::uint8_t code) {
-  unsigned m = 0;
-  for (int k = 0; k < 3; ++k) m |= 1u << ((code >> (2 * k)) & 3);
-  return m;
+// The corners of each quad triangle's shape code (its low six bits), one bit each: read from a
+// table, as prepare asks for them several times per triangle.
+constexpr std::array<std::uint8_t, 64> kCorners = [] {
+  std::array<std::uint8_t, 64> t{};
+  for (int code = 0; code < 64; ++code)
+    for (int k = 0; k < 3; ++k) t[code] |= std::uint8_t(1u << ((code >> (2 * k)) & 3));
+  return t;
+}();
+unsigned corners_of(std::uint8_t code) { return kCorners[code & 63]; }
+
+// A quad's corners (bits 0 top left, 1 top right, 2 bottom left, 3 bottom right) as bits of a
+// grid of vertices `row_width` to a row, the quad's top left corner at bit 0.
+inline std::uint64_t corner_grid_bits(unsigned corners, int row_width) {
+  return std::uint64_t(corners & 3) | (std::uint64_t(corners >> 2) << row_width);
 }
 
 // Quad::split for a quad whose triangles' usability is known.
@@ -221,6 +252,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   p.QW = frame.width - 1, p.QH = frame.height - 1;
   const int W = frame.width, QW = p.QW, QH = p.QH;
   p.quad.assign(std::size_t(QW) * std::size_t(QH), Quad{});
+  const bool centred = centred_where_valid(frame);
   for (std::size_t t = 0; t < triangles.size(); ++t) {
     const FrameTriangle& tri = triangles[t];
     // One division per triangle (this loop runs for every read of a frame, and a sweep reads a
@@ -237,7 +269,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       if (along >= 2 * std::uint32_t(W)) return false;  // two rows or more below
       const int r = rl + int(along >= std::uint32_t(W));  // no branch: the rows alternate
       const int c = int(along) - (r - rl) * W;
-      if (!is_pixel_centre(frame, i, r, c)) return false;
+      if (!(centred ? frame.valid[i] != 0 : is_pixel_centre(frame, i, r, c))) return false;
       c0 = std::min(c0, c), c1 = std::max(c1, c), r1 = std::max(r1, r);
       rk[k] = r, ck[k] = c;
     }
@@ -436,10 +468,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
             coarsest_of[g.level] = g.coarsest;
             levels_seen |= 1u << g.level;
           }
-          for (int k = 0; k < 3; ++k) {
-            const int corner = (qd.shape[slot] >> (2 * k)) & 3;
-            used[g.level] |= std::uint64_t{1} << ((r - qr0 + (corner >> 1)) * vw + (c - qc0 + (corner & 1)));
-          }
+          used[g.level] |= corner_grid_bits(corners_of(qd.shape[slot]), vw) << ((r - qr0) * vw + (c - qc0));
         }
       }
     if (!(n.norm() > 1e-6)) n = Vector3d::UnitZ();  // any direction is a valid bound

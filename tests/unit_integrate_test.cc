@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -486,6 +487,60 @@ TEST(Integrate, OrthographicFramesUseThePrismPath) {
   IntegrateStats st;
   EXPECT_FALSE(integrate_frame_projective(f, triangulate(f, {}), test_root(), {}, map, &st));
   EXPECT_EQ(map.voxel_count(), 0u);
+}
+
+// The voxel-centric path indexes triangles by pixel quad, so every vertex must sit at its pixel
+// centre. prepare checks a frame's positions once where exactly its valid samples are centred and
+// each triangle's vertices otherwise: both must give what checking every vertex gives.
+TEST(Integrate, OffCentreVerticesUseThePrismPath) {
+  const DepthFrame plane = plane_frame(2.0, 12);
+  const auto tris = triangulate(plane, {});
+  auto integrated = [&](const DepthFrame& f, BrickMap& map) {
+    IntegrateStats st;
+    return integrate_frame_projective(f, tris, test_root(), {}, map, &st);
+  };
+  BrickMap reference(2);
+  ASSERT_TRUE(integrated(plane, reference));
+  ASSERT_GT(reference.voxel_count(), 100u);
+
+  // A vertex a quarter pixel off: refused (the caller integrates the frame by prisms).
+  DepthFrame moved = plane;
+  moved.image_pos[5 * 12 + 6].x() += 0.25f;
+  BrickMap refused(2);
+  EXPECT_FALSE(integrated(moved, refused));
+  EXPECT_EQ(refused.voxel_count(), 0u);
+
+  // An invalid sample that no triangle uses, at its pixel centre: the frame is no longer "exactly
+  // the valid samples centred", so each vertex is checked, and the field is the same.
+  DepthFrame hole = plane;
+  const std::size_t corner = 0;  // with its neighbours valid, dropping it drops its quad's triangles only
+  hole.valid[corner] = 0;
+  std::vector<std::array<std::uint32_t, 3>> kept;
+  for (const auto& t : tris)
+    if (t[0] != corner && t[1] != corner && t[2] != corner) kept.push_back(t);
+  ASSERT_LT(kept.size(), tris.size());
+  IntegrateStats st_a, st_b;
+  BrickMap centred(2), checked(2);
+  ASSERT_TRUE(integrate_frame_projective(hole, kept, test_root(), {}, centred, &st_a));
+  hole.image_pos[corner] = Eigen::Vector2f(0.5f, 0.5f);  // fill_perspective_samples leaves it zero
+  ASSERT_TRUE(integrate_frame_projective(hole, kept, test_root(), {}, checked, &st_b));
+  EXPECT_EQ(st_a.contributions, st_b.contributions);
+  EXPECT_GT(st_a.contributions, 0u);
+  EXPECT_EQ(centred.voxel_count(), checked.voxel_count());
+  for (Brick* br : centred.bricks())
+    br->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+      const VoxelData* w = checked.find(k);
+      ASSERT_NE(w, nullptr);
+      EXPECT_EQ(v.distance, w->distance);
+      EXPECT_EQ(v.weight, w->weight);
+    });
+
+  // A triangle on the invalid sample, whose position (zero) is off its centre: refused, by its
+  // validity alone now that the valid samples are exactly the centred ones.
+  hole.image_pos[corner] = Eigen::Vector2f::Zero();
+  BrickMap on_hole(2);
+  EXPECT_FALSE(integrate_frame_projective(hole, tris, test_root(), {}, on_hole, &st_b));
+  EXPECT_EQ(on_hole.voxel_count(), 0u);
 }
 
 }  // namespace sf
