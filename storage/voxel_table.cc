@@ -1,6 +1,10 @@
 #include "storage/voxel_table.h"
 
+#include <algorithm>
+#include <cstdint>
+#include <cstdlib>
 #include <functional>
+#include <new>
 #include <utility>
 
 namespace sf {
@@ -9,11 +13,6 @@ std::size_t VoxelTable::live_count() const {
   std::size_t n = 0;
   for_each([&](VoxelKey, const VoxelData&) { ++n; });
   return n;
-}
-
-void VoxelTable::recount() {
-  bytes_ = blocks_.capacity() * sizeof(Block) + index_.capacity() * sizeof(Slot);
-  for (const Block& b : blocks_) bytes_ += (std::size_t{1} << (3 * b.log)) * sizeof(VoxelData);
 }
 
 VoxelData* VoxelTable::find_block(std::uint64_t origin) const {
@@ -33,8 +32,32 @@ void VoxelTable::insert_slot(std::uint64_t origin, VoxelData* voxels) {
 }
 
 void VoxelTable::reindex(std::size_t capacity) {
-  index_.assign(capacity, Slot{kEmpty, nullptr});
-  for (const Block& b : blocks_) insert_slot(b.origin.bits, b.voxels.get());
+  std::vector<Slot> old(capacity, Slot{kEmpty, nullptr});
+  old.swap(index_);
+  for (const Slot& s : old)
+    if (s.key != kEmpty) insert_slot(s.key, s.voxels);
+}
+
+VoxelData* VoxelTable::allocate(std::size_t voxels) {
+  constexpr std::size_t kLine = 64 / sizeof(VoxelData);  // voxels per cache line
+  voxels = (voxels + kLine - 1) / kLine * kLine;
+  if (room_ < voxels) {
+    std::size_t n = chunks_.empty() ? kFirstChunkVoxels : std::min(2 * (chunk_bytes_ / sizeof(VoxelData)), kMaxChunkVoxels);
+    n = std::max(n, voxels);
+    // One cache line more than asked for, to align the first voxel (calloc aligns to 16 bytes).
+    const std::size_t bytes = n * sizeof(VoxelData) + 64;
+    void* raw = std::calloc(1, bytes);
+    if (!raw) throw std::bad_alloc();
+    chunks_.emplace_back(raw);
+    chunk_bytes_ += bytes;
+    const std::uintptr_t at = (reinterpret_cast<std::uintptr_t>(raw) + 63) & ~std::uintptr_t{63};
+    next_ = reinterpret_cast<VoxelData*>(at);
+    room_ = n;
+  }
+  VoxelData* const out = next_;
+  next_ += voxels;
+  room_ -= voxels;
+  return out;
 }
 
 BlockRef VoxelTable::block(VoxelKey key, bool create) {
@@ -42,21 +65,11 @@ BlockRef VoxelTable::block(VoxelKey key, bool create) {
   const int log = block_log(key.level(), brick_level_);
   if (VoxelData* found = find_block(origin.bits)) return {origin, log, found};
   if (!create) return {origin, log, nullptr};
-  Block b;
-  b.origin = origin;
-  b.log = log;
-  b.voxels = std::make_unique<VoxelData[]>(std::size_t{1} << (3 * log));
-  VoxelData* const voxels = b.voxels.get();
-  const std::size_t old_capacity = blocks_.capacity();
-  blocks_.push_back(std::move(b));
-  bytes_ += (std::size_t{1} << (3 * log)) * sizeof(VoxelData) + (blocks_.capacity() - old_capacity) * sizeof(Block);
-  if ((blocks_.size() + 1) * 10 > index_.size() * 7) {
-    bytes_ -= index_.capacity() * sizeof(Slot);
+  VoxelData* const voxels = allocate(std::size_t{1} << (3 * log));
+  ++blocks_;
+  if ((blocks_ + 1) * 10 > index_.size() * 7)
     reindex(index_.empty() ? 16 : index_.size() * 2);
-    bytes_ += index_.capacity() * sizeof(Slot);
-  } else {
-    insert_slot(origin.bits, voxels);
-  }
+  insert_slot(origin.bits, voxels);
   return {origin, log, voxels};
 }
 
@@ -75,27 +88,29 @@ VoxelData* VoxelTable::find(VoxelKey key) {
 VoxelData& VoxelTable::find_or_insert(VoxelKey key) { return block(key, true).at(key); }
 
 void VoxelTable::compact() {
-  std::vector<Block> kept;
-  for (Block& b : blocks_) {
-    const std::size_t n = std::size_t{1} << (3 * b.log);
+  VoxelTable kept(brick_level_);
+  for (const Slot& s : index_) {
+    if (s.key == kEmpty) continue;
+    const std::size_t n = std::size_t{1} << (3 * block_log(VoxelKey{s.key}.level(), brick_level_));
     bool any = false;
     for (std::size_t i = 0; i < n; ++i) {
-      if (b.voxels[i].erased()) b.voxels[i] = VoxelData{};
-      any = any || b.voxels[i].live();
+      if (s.voxels[i].erased()) s.voxels[i] = VoxelData{};
+      any = any || s.voxels[i].live();
     }
-    if (any) kept.push_back(std::move(b));
+    if (!any) continue;
+    VoxelData* const to = kept.block(VoxelKey{s.key}, true).data;
+    std::copy(s.voxels, s.voxels + n, to);
   }
-  blocks_ = std::move(kept);
-  std::size_t cap = 16;
-  while ((blocks_.size() + 1) * 10 > cap * 7) cap *= 2;
-  reindex(cap);
-  recount();
+  *this = std::move(kept);
 }
 
 void VoxelTable::clear() {
-  std::vector<Block>().swap(blocks_);
   std::vector<Slot>().swap(index_);
-  bytes_ = 0;
+  std::vector<std::unique_ptr<void, FreeChunk>>().swap(chunks_);
+  next_ = nullptr;
+  room_ = 0;
+  chunk_bytes_ = 0;
+  blocks_ = 0;
 }
 
 }  // namespace sf
