@@ -754,7 +754,7 @@ class ColumnBounds {
 // A candidate voxel of a lattice row on its way through the kernel's phases.
 struct Candidate {
   Vector3d X;                     // its centre
-  Vector2d q;                     // its projection, pixels
+  Vector2d uv;                    // its projection in its pixel quad's coordinates, [0.5, 1.5) each
   double E[3];                    // the owner's edge functions at q
   const Ownership* shape;         // the owner's shape (moved by the quad's column and row)
   std::int32_t owner;             // the owner's index in Prepared::tris
@@ -805,7 +805,7 @@ struct ColumnTile {
     if (!(col >= t.c0 && col < t.c1 && row >= t.r0 && row < t.r1)) continue;  // another tile's voxel
     Candidate& cand = batch.cand[n++];
     cand.X = X;
-    cand.q = q;
+    cand.uv = Vector2d(q.x() - double(col), q.y() - double(row));  // exact: see Ownership::edge_local
     cand.col = col, cand.row = row;
     cand.ia = std::int32_t(ia), cand.ib = std::int32_t(ib), cand.ic = std::int32_t(ic);
   }
@@ -883,14 +883,15 @@ std::size_t project_column_pairs(const ColumnLanes& lanes, const double terms[3]
     const int last = ia + 1 <= i1 ? 3 : 1;  // the second lane is past the column's end
     const int keep = in_front & _mm_movemask_ps(_mm_castsi128_ps(in_tile)) & last;
     const __m128i colrow = _mm_unpacklo_epi32(col, row);  // col0 row0 col1 row1
+    // The projection in its quad's coordinates, as the scalar path computes it (exact).
+    const __m128d u = _mm_sub_pd(qx, _mm_cvtepi32_pd(col)), v = _mm_sub_pd(qy, _mm_cvtepi32_pd(row));
     for (int lane = 0; lane < 2; ++lane) {
       Candidate& cand = batch.cand[n];
       const __m128d x = lane == 0 ? xa : _mm_unpackhi_pd(xa, xa);
-      const __m128d q = lane == 0 ? _mm_unpacklo_pd(qx, qy) : _mm_unpackhi_pd(qx, qy);
       cand.X[AX] = _mm_cvtsd_f64(x);
       cand.X[B] = base[B];
       cand.X[C] = base[C];
-      _mm_storeu_pd(cand.q.data(), q);
+      _mm_storeu_pd(cand.uv.data(), lane == 0 ? _mm_unpacklo_pd(u, v) : _mm_unpackhi_pd(u, v));
       _mm_storel_epi64(reinterpret_cast<__m128i*>(&cand.col), lane == 0 ? colrow : _mm_srli_si128(colrow, 8));
       cand.ia = std::int32_t(ia + lane), cand.ib = std::int32_t(ib), cand.ic = std::int32_t(ic);
       n += std::size_t(keep >> lane & 1);
@@ -1225,10 +1226,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           std::size_t owned = 0;
           for (std::uint32_t k = 0; k < n; ++k) {
             Candidate& cand = batch.cand[k];
-            const Vector2d q = cand.q;
             const int col = cand.col, row = cand.row;
-            // q in the quad's coordinates, [0.5, 1.5) each (exact: see Ownership::edge_local).
-            const double U = q.x() - double(col), V = q.y() - double(row);
+            const double U = cand.uv.x(), V = cand.uv.y();
             auto try_triangle = [&](const Quad& qd, int slot, double u, double v) {
               const std::uint8_t code = qd.shape[slot];
               if (!(code & Quad::kUsable)) return false;
