@@ -142,16 +142,10 @@ bool is_pixel_centre(const DepthFrame& f, std::uint32_t i, int r, int c) {
 // three vertices' (every sample is a vertex of up to six triangles).
 bool centred_where_valid(const DepthFrame& f) {
   if (f.image_pos.size() != f.size() || f.valid.size() != f.size()) return false;
-  const float* pos = f.image_pos.data()->data();
   for (int r = 0; r < f.height; ++r) {
-    const float y = float(r) + 0.5f;
-    const std::size_t row = std::size_t(r) * std::size_t(f.width);
+    const std::uint32_t row = std::uint32_t(r) * std::uint32_t(f.width);
     bool same = true;  // no early exit within a row, so that the loop has no unpredictable branch
-    for (int c = 0; c < f.width; ++c) {
-      const std::size_t i = row + std::size_t(c);
-      const bool centred = pos[2 * i] == float(c) + 0.5f && pos[2 * i + 1] == y;
-      same &= centred == (f.valid[i] != 0);
-    }
+    for (int c = 0; c < f.width; ++c) same &= is_pixel_centre(f, row + std::uint32_t(c), r, c) == (f.valid[row + c] != 0);
     if (!same) return false;
   }
   return true;

@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <functional>
 #include <new>
+#include <type_traits>
 #include <utility>
 
 namespace sf {
@@ -39,6 +40,8 @@ void VoxelTable::reindex(std::size_t capacity) {
 }
 
 VoxelData* VoxelTable::allocate(std::size_t voxels) {
+  static_assert(std::is_trivially_copyable_v<VoxelData> && std::is_trivially_destructible_v<VoxelData>,
+                "blocks are calloc'd bytes, never constructed or destroyed");
   constexpr std::size_t kLine = 64 / sizeof(VoxelData);  // voxels per cache line
   voxels = (voxels + kLine - 1) / kLine * kLine;
   if (room_ < voxels) {

@@ -298,10 +298,11 @@ class VoxelTable {
   VoxelData* allocate(std::size_t voxels);
 
   // The arena: blocks' voxels in chunks that never move (pointers stay valid until compact() or
-  // clear()), zeroed by calloc, which skips the work for memory fresh from the kernel. One heap
-  // allocation per block cost a 16-byte header each, a call to malloc and a memset, and a block
-  // record beside the index; the chunks grow from 2 KiB to 32 KiB, so that a brick with few
-  // voxels does not hold a large chunk half empty (a city job has some 35,000 bricks).
+  // clear()), zeroed by calloc (all zero bytes are VoxelData{}, an implicit-lifetime type that
+  // calloc's memory holds without a constructor). One heap allocation per block cost a 16-byte
+  // header each, a call to malloc and a memset, and a block record beside the index; the chunks
+  // grow from 2 KiB to 32 KiB, so that a brick with few voxels does not hold a large chunk half
+  // empty (a city job has some 35,000 bricks).
   struct FreeChunk {
     void operator()(void* p) const { std::free(p); }
   };

@@ -270,6 +270,24 @@ TEST(VoxelTable, BlockShapeFollowsTheBrickLevel) {
   EXPECT_EQ(t.live_count(), 1u);
 }
 
+// Integration holds pointers into blocks while other blocks are made (voxel_table.h): the arena's
+// chunks never move, however many blocks and index growths follow.
+TEST(VoxelTable, PointersIntoBlocksOutliveGrowth) {
+  VoxelTable t(4);
+  const VoxelKey first = VoxelKey::make(10, 5, 6, 7);
+  VoxelData* const held = &t.find_or_insert(first);
+  held->weight = 1;
+  const std::size_t bytes = t.memory_bytes();
+  for (std::uint32_t i = 0; i < 20000; ++i) t.find_or_insert(VoxelKey::make(10, 64 + i % 200, i / 200, 9)).weight = 2;
+  EXPECT_GT(t.memory_bytes(), 20 * bytes);  // many chunks and a much larger index since
+  held->distance = 0.25f;
+  held->weight = 3;
+  ASSERT_NE(t.find(first), nullptr);
+  EXPECT_EQ(t.find(first), held);
+  EXPECT_EQ(t.find(first)->distance, 0.25f);
+  EXPECT_EQ(t.live_count(), 20001u);
+}
+
 TEST(VoxelTable, GrowsFindsAndCompacts) {
   VoxelTable t(4);
   for (std::uint32_t i = 0; i < 1000; ++i) t.find_or_insert(VoxelKey::make(10, i, i % 7, 3)).weight = float(i + 1);
