@@ -4,6 +4,7 @@
 #include <fstream>
 
 #include "engine/error.h"
+#include "engine/input/file_util.h"
 #include "engine/input/image_io.h"
 #include "tests/test_util.h"
 
@@ -73,6 +74,43 @@ TEST(InputImageIo, ReadsRealKinectFrame) {
   EXPECT_EQ(colour.width, 640);
   EXPECT_EQ(colour.height, 480);
   EXPECT_EQ(colour.channels, 3);
+}
+
+// A depth map's colour samples the image pixel whose area holds the depth pixel's centre: a 6x4
+// image on a 3x2 depth map (scale 2) gives source columns int((c + 0.5) 2) = 1, 3, 5 and rows 1, 3;
+// a 6x5 grey one on a 4x3 map (scale 1.5, 5/3) columns int(0.75) = 0, int(2.25) = 2, 3, 5 and
+// rows int(0.83) = 0, int(2.5) = 2, 4.
+TEST(InputImageIo, ColourSamplesThePixelHoldingEachDepthPixelsCentre) {
+  Image8 rgb{6, 4, 3, {}}, grey{6, 5, 1, {}};
+  for (int r = 0; r < 5; ++r)
+    for (int c = 0; c < 6; ++c) {
+      if (r < 4) rgb.data.insert(rgb.data.end(), {std::uint8_t(10 * r + c), std::uint8_t(100 + c), std::uint8_t(200 + r)});
+      grey.data.push_back(std::uint8_t(10 * r + c));
+    }
+  const std::vector<Rgb8> half = input_detail::sample_colour(rgb, 3, 2);
+  ASSERT_EQ(half.size(), 6u);
+  const int half_cols[3] = {1, 3, 5}, half_rows[2] = {1, 3};
+  for (int r = 0; r < 2; ++r)
+    for (int c = 0; c < 3; ++c) {
+      const Rgb8 v = half[std::size_t(r) * 3 + c];
+      EXPECT_EQ(v[0], 10 * half_rows[r] + half_cols[c]);
+      EXPECT_EQ(v[1], 100 + half_cols[c]);
+      EXPECT_EQ(v[2], 200 + half_rows[r]);
+    }
+  const std::vector<Rgb8> odd = input_detail::sample_colour(grey, 4, 3);
+  ASSERT_EQ(odd.size(), 12u);
+  const int odd_cols[4] = {0, 2, 3, 5}, odd_rows[3] = {0, 2, 4};
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) {
+      const Rgb8 v = odd[std::size_t(r) * 4 + c];
+      EXPECT_EQ(v[0], 10 * odd_rows[r] + odd_cols[c]);
+      EXPECT_EQ(v[1], v[0]);
+      EXPECT_EQ(v[2], v[0]);
+    }
+  // The same size: each pixel itself.
+  const std::vector<Rgb8> same = input_detail::sample_colour(rgb, 6, 4);
+  EXPECT_EQ(same[2 * 6 + 5][0], 25);
+  EXPECT_EQ(same[2 * 6 + 5][2], 202);
 }
 
 TEST(InputImageIo, BadFilesAreInputErrorsNamingTheFile) {

@@ -77,13 +77,26 @@ std::string_view trim(std::string_view line) {
 std::vector<Rgb8> sample_colour(const Image8& image, int width, int height) {
   std::vector<Rgb8> out(std::size_t(width) * height);
   const double sx = double(image.width) / width, sy = double(image.height) / height;
+  // Each column's byte offset in a source row, once per image rather than once per pixel (every
+  // depth map is read once per plan tile that it reaches).
+  std::vector<std::size_t> src_offset(static_cast<std::size_t>(width));
+  for (int col = 0; col < width; ++col)
+    src_offset[std::size_t(col)] = std::size_t(std::min(image.width - 1, int((col + 0.5) * sx))) * image.channels;
+  const bool grey = image.channels < 3;
   for (int row = 0; row < height; ++row) {
     const int src_row = std::min(image.height - 1, int((row + 0.5) * sy));
-    for (int col = 0; col < width; ++col) {
-      const int src_col = std::min(image.width - 1, int((col + 0.5) * sx));
-      const std::uint8_t* p = &image.data[(std::size_t(src_row) * image.width + src_col) * image.channels];
-      out[std::size_t(row) * width + col] =
-          image.channels >= 3 ? Rgb8{p[0], p[1], p[2]} : Rgb8{p[0], p[0], p[0]};
+    const std::uint8_t* const line = &image.data[std::size_t(src_row) * image.width * image.channels];
+    Rgb8* const dst = &out[std::size_t(row) * width];
+    if (grey) {
+      for (int col = 0; col < width; ++col) {
+        const std::uint8_t v = line[src_offset[std::size_t(col)]];
+        dst[col] = Rgb8{v, v, v};
+      }
+    } else {
+      for (int col = 0; col < width; ++col) {
+        const std::uint8_t* p = line + src_offset[std::size_t(col)];
+        dst[col] = Rgb8{p[0], p[1], p[2]};
+      }
     }
   }
   return out;
