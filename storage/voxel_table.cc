@@ -33,8 +33,7 @@ void VoxelTable::insert_slot(std::uint64_t origin, VoxelData* voxels) {
 }
 
 void VoxelTable::reindex(std::size_t capacity) {
-  std::vector<Slot> old(capacity, Slot{kEmpty, nullptr});
-  old.swap(index_);
+  const std::vector<Slot> old = std::exchange(index_, std::vector<Slot>(capacity, Slot{kEmpty, nullptr}));
   for (const Slot& s : old)
     if (s.key != kEmpty) insert_slot(s.key, s.voxels);
 }
