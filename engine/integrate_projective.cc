@@ -9,10 +9,12 @@
 // (at most two) triangles that may own its line of sight, and ownership is decided by the same
 // edge functions as in the prism path. A voxel belongs to the tile of its quad, so every voxel is
 // evaluated once per level and depth map; ownership gives it at most one contribution, so tiles
-// write their voxels concurrently without locks (blocks are created under their brick's lock).
+// write their voxels concurrently without locks (groups of blocks are created under their brick's
+// lock, blocks by a compare-and-swap in their group: storage/voxel_table.h).
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
@@ -100,29 +102,52 @@ inline int fast_floor(double x) {
   return i - (double(i) > x ? 1 : 0);
 }
 
-// Per-task cache of recently written blocks (direct mapped), so that the brick lock and the
-// block index are consulted once per block rather than once per voxel.
+// Where the voxel at place t (x fastest) of a tile block lies in its group when the group is one
+// block (coarse levels): block 0, place t (the counterpart of kTileToGroup).
+constexpr std::array<std::uint8_t, 64> kSamePlace = [] {
+  std::array<std::uint8_t, 64> t{};
+  for (int q = 0; q < 64; ++q) t[q] = std::uint8_t(q);
+  return t;
+}();
+
+// Per-task cache of recently written groups of blocks (direct mapped), so that the brick lock and
+// the block index are consulted once per 4^3 region rather than once per voxel.
 class BlockCache {
  public:
-  explicit BlockCache(BrickMap& map) : map_(map) {}
-  // The voxels of the block with origin `origin` holding `key`, x fastest.
-  VoxelData* block(VoxelKey key, VoxelKey origin) {
-    BlockRef& b = slots_[std::hash<VoxelKey>{}(origin) & (kSlots - 1)];
-    if (!b.data || b.origin != origin) {
-      b = map_.block(key);
-      // A block fetched here was last written by another depth map, long out of the caches: ask
-      // for all its lines at once rather than one miss after another as a column reaches them.
-      const char* bytes = reinterpret_cast<const char*>(b.data);
-      const std::size_t size = sizeof(VoxelData) << (3 * b.log);
-      for (std::size_t off = 0; off < size; off += 64) __builtin_prefetch(bytes + off, 1);
+  // A cache lives in one task, so on one thread: its index picks the arena cursor blocks are
+  // carved with (VoxelTable::make_part_shared).
+  explicit BlockCache(BrickMap& map)
+      : map_(map), thread_(unsigned(std::max(tbb::this_task_arena::current_thread_index(), 0))) {}
+  // The group with origin `origin` holding `key`; `brick` is set to its brick.
+  BlockGroup* group(VoxelKey key, VoxelKey origin, Brick** brick) {
+    Entry& e = slots_[std::hash<VoxelKey>{}(origin) & (kSlots - 1)];
+    if (!e.group || e.origin != origin) {
+      e.origin = origin;
+      e.group = map_.group(key, &e.brick);
+      // A group fetched here was last written by another depth map, long out of the caches: ask
+      // for all its blocks' lines at once rather than one miss after another as a column reaches
+      // them.
+      const std::size_t size = sizeof(VoxelData) << (3 * block_log(key.level(), map_.brick_level()));
+      for (const std::atomic<VoxelData*>& part : e.group->part)
+        if (const char* bytes = reinterpret_cast<const char*>(part.load(std::memory_order_relaxed)))
+          for (std::size_t off = 0; off < size; off += 64) __builtin_prefetch(bytes + off, 1);
     }
-    return b.data;
+    *brick = e.brick;
+    return e.group;
   }
+  // Block `part` (edge 2^log) of `g`, a group of `brick`, made if absent.
+  VoxelData* part(Brick& brick, BlockGroup& g, int part, int log) { return map_.part(brick, g, part, log, thread_); }
 
  private:
+  struct Entry {
+    VoxelKey origin;
+    BlockGroup* group = nullptr;
+    Brick* brick = nullptr;
+  };
   static constexpr std::size_t kSlots = 256;
   BrickMap& map_;
-  BlockRef slots_[kSlots];
+  const unsigned thread_;
+  Entry slots_[kSlots];
 };
 
 struct HalfSpace {  // m . X >= k
@@ -1162,11 +1187,21 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         ColumnBounds bounds;
         bounds.set_item(cp, lower, n_lower, upper, n_upper);
         const ColumnProjector project(sensor, ax, h, ColumnTile{c0, c1, r0, r1});
-        // Blocks of this level: 2^log voxels per axis, x fastest (VoxelTable); phase 4 below
-        // finds a voxel in its block by these offsets.
-        const int log = block_log(level, brick_level);
-        const std::uint32_t in_block = (1u << log) - 1;
-        const int shift_a = ax * log;
+        // Groups of this level: 2^glog voxels per axis, as blocks of 2^log (VoxelTable). Phase 4
+        // below finds a voxel's place in its group's tile block by these offsets (x fastest), and
+        // its block and place there by `place`: kTileToGroup where a group is eight blocks, else
+        // the same place.
+        const int log = block_log(level, brick_level), glog = tile_block_log(level, brick_level);
+        const std::uint32_t in_group = (1u << glog) - 1;
+        const int shift_a = ax * glog;
+        const std::uint8_t* const place = glog > log ? kTileToGroup.data() : kSamePlace.data();
+        const auto key_of = [&](std::int64_t ia, std::int64_t ib, std::int64_t ic) {
+          std::int64_t idx[3];
+          idx[ax] = ia;
+          idx[bx] = ib;
+          idx[cx] = ic;
+          return VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
+        };
         std::size_t n = 0;  // candidates in the batch
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
           std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
@@ -1263,29 +1298,29 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           }
           // Phase 3: distance, weight and colour.
           const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned);
-          // Phase 4: the voxels, each asked for ahead of its write. A column crosses a block every
-          // 2^log voxels, so a voxel's block is mostly the one in hand, and the key, its origin
-          // and the block cache are consulted once per block.
-          std::int64_t run_ib = -1, run_ic = -1, run = -1;  // row, column and ia >> log of the block in hand
-          VoxelData* run_voxels = nullptr;
+          // Phase 4: the voxels, each asked for ahead of its write. A column crosses a group (a 4^3
+          // region of 2^3 blocks, voxel_table.h) every 2^glog voxels, so a voxel's group is mostly
+          // the one in hand, and the key, its origin and the block cache are consulted once per
+          // group; its block is one of the group's parts, read without a lock.
+          std::int64_t run_ib = -1, run_ic = -1, run = -1;  // row, column and ia >> glog of the group in hand
+          BlockGroup* run_group = nullptr;
+          Brick* run_brick = nullptr;
           std::uint32_t column_offset = 0;
           for (std::size_t j = 0; j < sampled; ++j) {
             Candidate& cand = batch.cand[batch.sampled[j]];
             const std::int64_t ia = cand.ia, ib = cand.ib, ic = cand.ic;
-            if (ic != run_ic || ib != run_ib || (ia >> log) != run) {
-              std::int64_t idx[3];
-              idx[ax] = ia;
-              idx[bx] = ib;
-              idx[cx] = ic;
-              const VoxelKey key =
-                  VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
-              run_voxels = cache.block(key, block_origin(key, brick_level));
-              run = ia >> log;
+            if (ic != run_ic || ib != run_ib || (ia >> glog) != run) {
+              const VoxelKey key = key_of(ia, ib, ic);
+              run_group = cache.group(key, aligned_origin(key, glog), &run_brick);
+              run = ia >> glog;
               run_ic = ic;
               run_ib = ib;
-              column_offset = ((std::uint32_t(ib) & in_block) << (bx * log)) | ((std::uint32_t(ic) & in_block) << (cx * log));
+              column_offset = ((std::uint32_t(ib) & in_group) << (bx * glog)) | ((std::uint32_t(ic) & in_group) << (cx * glog));
             }
-            cand.voxel = &run_voxels[column_offset | ((std::uint32_t(ia) & in_block) << shift_a)];
+            const unsigned q = place[column_offset | ((std::uint32_t(ia) & in_group) << shift_a)];
+            VoxelData* voxels = run_group->part[q >> 3].load(std::memory_order_acquire);
+            if (!voxels) voxels = cache.part(*run_brick, *run_group, int(q >> 3), log);
+            cand.voxel = voxels + (q & 7);
             __builtin_prefetch(cand.voxel, 1);
           }
           // Phase 5: the writes, four at a time where the depth map has colour (the voxels of an

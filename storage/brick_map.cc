@@ -113,6 +113,29 @@ BlockRef BrickMap::block(VoxelKey key) {
   return ref;
 }
 
+BlockGroup* BrickMap::group(VoxelKey key, Brick** brick_out) {
+  Brick& b = brick(brick_of(key, brick_level_));
+  *brick_out = &b;
+  std::lock_guard lock(b.mutex);
+  make_resident(b);
+  b.dirty = true;
+  b.last_use = epoch_;
+  const std::int64_t before = std::int64_t(b.voxels.memory_bytes());
+  BlockGroup* const g = b.voxels.group(key, true);
+  resident_bytes_ += std::int64_t(b.voxels.memory_bytes()) - before;
+  return g;
+}
+
+VoxelData* BrickMap::part(Brick& b, BlockGroup& group, int part, int log, unsigned thread) {
+  // Without the brick's lock (VoxelTable::make_part_shared takes it only to add a chunk, one block
+  // in ~250): under it, the lock's cache line went back and forth between the cores once per
+  // block, and so did the shared count, which now changes only when a chunk is added.
+  std::int64_t grown = 0;
+  VoxelData* const v = b.voxels.make_part_shared(group, part, log, b.mutex, thread, &grown);
+  if (grown != 0) resident_bytes_ += grown;
+  return v;
+}
+
 void BrickMap::make_resident(Brick& b) {
   if (b.resident) return;
   store_->read(b.coord, b.generation, b.voxels);
@@ -334,7 +357,7 @@ void BrickMap::compact() {
   std::unique_lock lock(bricks_mutex_);
   for (auto it = bricks_.begin(); it != bricks_.end();) {
     it->second->voxels.compact();
-    if (it->second->voxels.block_count() == 0)
+    if (it->second->voxels.group_count() == 0)
       it = bricks_.erase(it);
     else
       ++it;

@@ -120,6 +120,13 @@ class BrickMap {
   // returned pointer stays valid until compact() or clear(). Writers must never touch the same
   // voxel concurrently (integration guarantees it: one contribution per voxel per depth map).
   BlockRef block(VoxelKey key);
+  // The group of blocks holding `key` (VoxelTable::group), created if absent, and its brick; and
+  // block `part` (edge 2^log) of a group of `brick`, created if absent, by the thread of index
+  // `thread` in its task arena (it picks the chunk the block is carved from): the same guarantees
+  // as block(). Integration keeps a group and its brick at hand and reads and makes the group's
+  // blocks without the brick's lock (BlockGroup).
+  BlockGroup* group(VoxelKey key, Brick** brick);
+  VoxelData* part(Brick& brick, BlockGroup& group, int part, int log, unsigned thread);
 
   const VoxelData* find(VoxelKey key) const;  // not safe concurrently with apply()
   VoxelData* find(VoxelKey key);

@@ -323,22 +323,38 @@ std::uint64_t presence_mask(const VoxelData* v, std::size_t n, std::size_t* pres
   return mask;
 }
 
+// The 8-bit presence mask of part o of a group as bits of its tile block's mask (kGroupToTile
+// without a loop): part voxel i = x + 2 y + 4 z sits at tile bit (2 px + x) + 4 (2 py + y) +
+// 16 (2 pz + z) for the part's offset (px, py, pz).
+constexpr std::uint64_t group_part_bits(std::uint64_t m, int o) {
+  const std::uint64_t spread = (m & 3) | (m >> 2 & 3) << 4 | (m >> 4 & 3) << 16 | (m >> 6 & 3) << 20;
+  return spread << ((o & 1) * 2 + (o >> 1 & 1) * 8 + (o >> 2) * 32);
+}
+static_assert([] {
+  for (int q = 0; q < 64; ++q)
+    if (group_part_bits(std::uint64_t{1} << (q & 7), q >> 3) != std::uint64_t{1} << kGroupToTile[q]) return false;
+  return true;
+}(), "group_part_bits agrees with kGroupToTile");
+
 }  // namespace
 
 std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, const VoxelTable& voxels, bool durable,
                          TileBuffers* buffers) {
   TileBuffers unpooled(0);  // keeps nothing: pages mapped for this tile alone
   TileBuffers& pool = buffers ? *buffers : unpooled;
-  // Blocks in origin order, so the bytes do not depend on insertion order.
-  struct BlockView {
+  // The table's groups of blocks are the tile's blocks (voxel_table.h: a 4^3 block of the tile is
+  // up to eight 2^3 blocks of the table), in origin order, so the bytes do not depend on insertion
+  // order.
+  struct GroupView {
     VoxelKey origin;
-    int log;
-    const VoxelData* data;
+    const BlockGroup* group;
   };
-  std::vector<BlockView> blocks;
-  voxels.for_each_block([&](VoxelKey o, int log, const VoxelData* d) { blocks.push_back({o, log, d}); });
-  std::sort(blocks.begin(), blocks.end(), [](const BlockView& a, const BlockView& b) { return a.origin < b.origin; });
-  static_assert(3 * kMaxBlockLog <= 6, "a block's presence mask is one u64");
+  const int brick_level = voxels.brick_level();
+  std::vector<GroupView> blocks;
+  blocks.reserve(voxels.group_count());
+  voxels.for_each_group([&](VoxelKey o, const BlockGroup& g) { blocks.push_back({o, &g}); });
+  std::sort(blocks.begin(), blocks.end(), [](const GroupView& a, const GroupView& b) { return a.origin < b.origin; });
+  static_assert(3 * kTileBlockLog <= 6, "a tile block's presence mask is one u64");
   if (blocks.size() > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error(path.string() + ": brick of " + std::to_string(blocks.size()) +
                             " blocks, more than a tile's u32 count; use a finer octree.brick_level");
@@ -355,16 +371,35 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   try {
     ChunkWriter chunks(fd, tmp, pool);
     if (::lseek(fd, off_t(kHeaderBytes), SEEK_SET) < 0) throw_write_error(tmp.string(), "cannot write tile", errno);
-    for (const BlockView& b : blocks) {
-      const std::size_t n = std::size_t{1} << (3 * b.log);
+    for (const GroupView& b : blocks) {
+      const VoxelKey origin = b.origin;
+      const int log = tile_block_log(origin.level(), brick_level);
+      std::uint64_t mask;
       std::size_t present = 0;
-      const std::uint64_t mask = presence_mask(b.data, n, &present);
+      const VoxelData* parts[8];
+      const bool split = block_log(origin.level(), brick_level) != log;  // eight 2^3 blocks
+      if (!split) {
+        parts[0] = b.group->part[0].load(std::memory_order_relaxed);
+        mask = parts[0] ? presence_mask(parts[0], std::size_t{1} << (3 * log), &present) : 0;
+      } else {  // the tile block's mask from its parts' masks, in tile order (kGroupToTile)
+        mask = 0;
+        for (int o = 0; o < 8; ++o) {
+          parts[o] = b.group->part[o].load(std::memory_order_relaxed);
+          if (!parts[o]) continue;
+          std::size_t count = 0;
+          mask |= group_part_bits(presence_mask(parts[o], 8, &count), o);
+          present += count;
+        }
+      }
       const std::size_t bytes = 16 + present * kRecord;
       unsigned char* p = chunks.reserve(bytes);
-      put64(p, b.origin.bits);
+      put64(p, origin.bits);
       put64(p + 8, mask);
       p += 16;
-      for (std::uint64_t m = mask; m != 0; m &= m - 1, p += kRecord) put_record(p, b.data[std::countr_zero(m)]);
+      for (std::uint64_t m = mask; m != 0; m &= m - 1, p += kRecord) {
+        const int t = std::countr_zero(m), q = kTileToGroup[t];
+        put_record(p, split ? parts[q >> 3][q & 7] : parts[0][t]);
+      }
       chunks.commit(bytes);
     }
     const std::uint64_t payload_checksum = chunks.finish();
@@ -435,11 +470,12 @@ class BlockDecoder {
       throw bad("block " + std::to_string(b) + " has an invalid key");
     if (b > 0 && origin.bits <= previous_) throw bad("blocks out of order or duplicated");
     previous_ = origin.bits;
-    if (out_.block_origin(origin) != origin) throw bad("block " + std::to_string(b) + " is not aligned");
+    const int log = tile_block_log(level, brick_level_);
+    if (aligned_origin(origin, log) != origin) throw bad("block " + std::to_string(b) + " is not aligned");
     const BrickCoord bc = brick_of(origin, brick_level_);
     if (bc.x != coord_.x || bc.y != coord_.y || bc.z != coord_.z)
       throw bad("block " + std::to_string(b) + " lies outside the brick");
-    const std::size_t n = std::size_t{1} << (3 * block_log(level, brick_level_));
+    const std::size_t n = std::size_t{1} << (3 * log);
     const std::uint64_t all = n == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << n) - 1;
     std::uint64_t present = all;
     if (stores_presence(version_)) {
@@ -451,9 +487,37 @@ class BlockDecoder {
     const std::size_t record = record_bytes(version_);
     if (std::size_t(end - p) < std::size_t(std::popcount(present)) * record)
       throw bad("block " + std::to_string(b) + " runs past the payload");
-    BlockRef ref = out_.block(origin, true);
+    // The table's blocks are smaller than the tile's at the finer levels (voxel_table.h): there a
+    // record goes to its place in the group's blocks (kTileToGroup), and only the blocks holding a
+    // voxel are made. Tiles without presence masks (versions 1-3) store absent voxels too: those
+    // tile blocks are decoded into `gathered_` and split.
+    const int table_log = block_log(level, brick_level_);
+    const bool by_part = table_log != log && stores_presence(version_);
+    VoxelData* data = nullptr;
+    BlockGroup* group = nullptr;
+    VoxelData* parts[8] = {};
+    if (table_log == log) {
+      data = out_.block(origin, true).data;
+    } else if (!by_part) {
+      data = gathered_;
+      std::fill_n(gathered_, n, VoxelData{});
+    }
     for (std::uint64_t m = present; m != 0; m &= m - 1, p += record) {
-      VoxelData& v = ref.data[std::countr_zero(m)];
+      const int t = std::countr_zero(m);
+      VoxelData* slot;
+      if (!by_part) {
+        slot = data + t;
+      } else {
+        const int q = kTileToGroup[t], o = q >> 3;
+        if (!parts[o]) {
+          if (!group) group = out_.group(origin, true);
+          const std::uint32_t dx = std::uint32_t(o & 1) << table_log, dy = std::uint32_t(o >> 1 & 1) << table_log,
+                              dz = std::uint32_t(o >> 2) << table_log;
+          parts[o] = out_.make_part(*group, VoxelKey::make(level, origin.x() + dx, origin.y() + dy, origin.z() + dz));
+        }
+        slot = parts[o] + (q & 7);
+      }
+      VoxelData& v = *slot;
       v.distance = get_float(p);
       v.weight = get_float(p + 4);
       if (!std::isfinite(v.distance) || !std::isfinite(v.weight))
@@ -472,6 +536,7 @@ class BlockDecoder {
         v.set_colour(colour, colour_weight);
       }
     }
+    if (table_log != log && !by_part) split(origin, log, table_log);
     ++decoded_;
     return p;
   }
@@ -486,8 +551,33 @@ class BlockDecoder {
   const BrickCoord coord_;
   const std::uint32_t block_count_;
   VoxelTable& out_;
+  // Copies the tile block in gathered_ (edge 2^log, origin `origin`) into the table's blocks of
+  // edge 2^table_log that hold a voxel (weight != 0).
+  void split(VoxelKey origin, int log, int table_log) {
+    const std::uint32_t parts = 1u << (log - table_log), edge = 1u << table_log;
+    for (std::uint32_t pz = 0; pz < parts; ++pz)
+      for (std::uint32_t py = 0; py < parts; ++py)
+        for (std::uint32_t px = 0; px < parts; ++px) {
+          const std::uint32_t x0 = px * edge, y0 = py * edge, z0 = pz * edge;
+          auto at = [&](std::uint32_t x, std::uint32_t y, std::uint32_t z) -> const VoxelData& {
+            return gathered_[(((z0 + z) << log | (y0 + y)) << log) | (x0 + x)];
+          };
+          bool any = false;
+          for (std::uint32_t z = 0; z < edge; ++z)
+            for (std::uint32_t y = 0; y < edge; ++y)
+              for (std::uint32_t x = 0; x < edge; ++x) any = any || at(x, y, z).weight != 0;
+          if (!any) continue;
+          VoxelData* const to =
+              out_.block(VoxelKey::make(origin.level(), origin.x() + x0, origin.y() + y0, origin.z() + z0), true).data;
+          for (std::uint32_t z = 0, v = 0; z < edge; ++z)
+            for (std::uint32_t y = 0; y < edge; ++y)
+              for (std::uint32_t x = 0; x < edge; ++x, ++v) to[v] = at(x, y, z);
+        }
+  }
+
   std::uint32_t decoded_ = 0;
   std::uint64_t previous_ = 0;  // the last block's origin key
+  VoxelData gathered_[std::size_t{1} << (3 * kTileBlockLog)];
 };
 
 }  // namespace
@@ -526,7 +616,10 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
   // LZ4 expands at most 255:1; a larger raw size is a lie, not an allocation to make.
   if ((!stores_chunks(version) && raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE)) || raw_size > 255 * stored_size + 16)
     throw bad("implausible raw size " + std::to_string(raw_size));
-  if (out.block_count() != 0) throw std::logic_error(name + ": read_tile into a non-empty table");
+  if (out.group_count() != 0) throw std::logic_error(name + ": read_tile into a non-empty table");
+  // A block takes at least 8 raw bytes (its key), so a damaged count cannot reserve more than the
+  // payload could hold.
+  out.reserve(std::min<std::uint64_t>(block_count, raw_size / 8));
   BlockDecoder decoder(name, version, brick_level, coord, block_count, out);
   try {
     if (stores_chunks(version)) {

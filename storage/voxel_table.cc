@@ -16,70 +16,158 @@ std::size_t VoxelTable::live_count() const {
   return n;
 }
 
-VoxelData* VoxelTable::find_block(std::uint64_t origin) const {
+BlockGroup* VoxelTable::find_group(std::uint64_t origin) const {
   if (index_.empty()) return nullptr;
   const std::size_t mask = index_.size() - 1;
   for (std::size_t i = std::hash<VoxelKey>{}(VoxelKey{origin}) & mask;; i = (i + 1) & mask) {
-    if (index_[i].key == origin) return index_[i].voxels;
+    if (index_[i].key == origin) return index_[i].group;
     if (index_[i].key == kEmpty) return nullptr;
   }
 }
 
-void VoxelTable::insert_slot(std::uint64_t origin, VoxelData* voxels) {
+void VoxelTable::insert_slot(std::uint64_t origin, BlockGroup* group) {
   const std::size_t mask = index_.size() - 1;
   std::size_t i = std::hash<VoxelKey>{}(VoxelKey{origin}) & mask;
   while (index_[i].key != kEmpty) i = (i + 1) & mask;
-  index_[i] = {origin, voxels};
+  index_[i] = {origin, group};
 }
 
 void VoxelTable::reindex(std::size_t capacity) {
   const std::vector<Slot> old = std::exchange(index_, std::vector<Slot>(capacity, Slot{kEmpty, nullptr}));
   for (const Slot& s : old)
-    if (s.key != kEmpty) insert_slot(s.key, s.voxels);
+    if (s.key != kEmpty) insert_slot(s.key, s.group);
 }
 
-VoxelData* VoxelTable::allocate(std::size_t voxels) {
+VoxelTable::VoxelTable(VoxelTable&& other) noexcept : brick_level_(other.brick_level_) { *this = std::move(other); }
+
+VoxelTable& VoxelTable::operator=(VoxelTable&& other) noexcept {
+  if (this == &other) return *this;
+  brick_level_ = other.brick_level_;
+  chunks_ = std::move(other.chunks_);
+  for (unsigned c = 0; c < kCursors; ++c)
+    current_[c].store(other.current_[c].exchange(nullptr, std::memory_order_relaxed), std::memory_order_relaxed);
+  chunk_bytes_ = std::exchange(other.chunk_bytes_, 0);
+  groups_ = std::exchange(other.groups_, 0);
+  index_ = std::move(other.index_);
+  return *this;
+}
+
+std::size_t VoxelTable::block_count() const {
+  std::size_t n = 0;
+  for_each_block([&](VoxelKey, int, const VoxelData*) { ++n; });
+  return n;
+}
+
+std::size_t VoxelTable::grow(std::size_t bytes, unsigned cursor) {
+  std::size_t n = chunks_.empty() ? kFirstChunkBytes : std::min(2 * chunk_bytes_, kMaxChunkBytes);
+  n = std::max(n, bytes);
+  // The head, and one cache line more to align it (calloc aligns to 16).
+  const std::size_t total = n + sizeof(ChunkHead) + 64;
+  void* raw = std::calloc(1, total);
+  if (!raw) throw std::bad_alloc();
+  chunks_.emplace_back(raw);
+  chunk_bytes_ += total;
+  auto* head = new (reinterpret_cast<void*>((reinterpret_cast<std::uintptr_t>(raw) + 63) & ~std::uintptr_t{63})) ChunkHead;
+  head->size = n;
+  // Release: a thread that finds this chunk finds its head set and its bytes zeroed.
+  current_[cursor].store(head, std::memory_order_release);
+  return total;
+}
+
+void* VoxelTable::allocate(std::size_t bytes, bool alone, std::mutex* lock, std::int64_t* grown, unsigned cursor) {
   static_assert(std::is_trivially_copyable_v<VoxelData> && std::is_trivially_destructible_v<VoxelData>,
                 "blocks are calloc'd bytes, never constructed or destroyed");
-  constexpr std::size_t kLine = 64 / sizeof(VoxelData);  // voxels per cache line
-  voxels = (voxels + kLine - 1) / kLine * kLine;
-  if (room_ < voxels) {
-    std::size_t n = chunks_.empty() ? kFirstChunkVoxels : std::min(2 * (chunk_bytes_ / sizeof(VoxelData)), kMaxChunkVoxels);
-    n = std::max(n, voxels);
-    // One cache line more than asked for, to align the first voxel (calloc aligns to 16 bytes).
-    const std::size_t bytes = n * sizeof(VoxelData) + 64;
-    void* raw = std::calloc(1, bytes);
-    if (!raw) throw std::bad_alloc();
-    chunks_.emplace_back(raw);
-    chunk_bytes_ += bytes;
-    const std::uintptr_t at = (reinterpret_cast<std::uintptr_t>(raw) + 63) & ~std::uintptr_t{63};
-    next_ = reinterpret_cast<VoxelData*>(at);
-    room_ = n;
+  bytes = (bytes + 63) & ~std::size_t{63};
+  cursor %= kCursors;
+  for (;;) {
+    ChunkHead* const c = current_[cursor].load(std::memory_order_acquire);
+    if (c) {
+      std::size_t at;
+      if (alone) {
+        at = c->used.load(std::memory_order_relaxed);
+        if (at + bytes <= c->size) c->used.store(at + bytes, std::memory_order_relaxed);
+      } else {
+        // Past the end, the count only marks the chunk as full: nothing is carved from there.
+        at = c->used.fetch_add(bytes, std::memory_order_relaxed);
+      }
+      if (at + bytes <= c->size) return c->bytes() + at;
+    }
+    std::unique_lock<std::mutex> held = lock ? std::unique_lock<std::mutex>(*lock) : std::unique_lock<std::mutex>();
+    if (current_[cursor].load(std::memory_order_relaxed) == c) {  // not replaced meanwhile by another thread
+      const std::size_t added = grow(bytes, cursor);
+      if (grown) *grown += std::int64_t(added);
+    }
   }
-  VoxelData* const out = next_;
-  next_ += voxels;
-  room_ -= voxels;
-  return out;
+}
+
+void VoxelTable::reserve(std::size_t groups) {
+  std::size_t capacity = index_.empty() ? 16 : index_.size();
+  while ((groups + 1) * 10 > capacity * 7) capacity *= 2;  // group()'s rule for growing
+  if (capacity > index_.size()) reindex(capacity);
+}
+
+BlockGroup* VoxelTable::group(VoxelKey key, bool create) {
+  const VoxelKey origin = aligned_origin(key, tile_block_log(key.level(), brick_level_));
+  if (BlockGroup* found = find_group(origin.bits)) return found;
+  if (!create) return nullptr;
+  BlockGroup* const g = new (allocate(sizeof(BlockGroup), false)) BlockGroup{};
+  ++groups_;
+  if ((groups_ + 1) * 10 > index_.size() * 7) reindex(index_.empty() ? 16 : index_.size() * 2);
+  insert_slot(origin.bits, g);
+  return g;
+}
+
+VoxelData* VoxelTable::part_voxels(int log, bool alone, std::mutex* lock, unsigned cursor, std::int64_t* grown) {
+  // calloc's zeros are VoxelData{} (absent voxels), and a VoxelData is an implicit-lifetime type,
+  // which memory from the malloc family holds without a constructor.
+  const std::size_t n = std::size_t{1} << (3 * log);
+  return static_cast<VoxelData*>(allocate(n * sizeof(VoxelData), alone, lock, grown, cursor));
+}
+
+VoxelData* VoxelTable::make_part(BlockGroup& group, VoxelKey key) {
+  std::atomic<VoxelData*>& part = group.part[group_part(key, brick_level_)];
+  VoxelData* v = part.load(std::memory_order_relaxed);
+  if (!v) {
+    v = part_voxels(block_log(key.level(), brick_level_), true, nullptr, 0, nullptr);
+    part.store(v, std::memory_order_relaxed);
+  }
+  return v;
+}
+
+VoxelData* VoxelTable::make_part_shared(BlockGroup& group, int part_index, int log, std::mutex& lock, unsigned cursor,
+                                        std::int64_t* grown) {
+  std::atomic<VoxelData*>& part = group.part[part_index];
+  VoxelData* made = part.load(std::memory_order_acquire);
+  if (made) return made;
+  VoxelData* const fresh = part_voxels(log, false, &lock, cursor, grown);
+  // Release: a thread that finds the pointer finds the block's zeroed voxels. If another thread
+  // made the block first, `fresh` stays unused in the arena (zeroed bytes no group points to).
+  return part.compare_exchange_strong(made, fresh, std::memory_order_acq_rel, std::memory_order_acquire) ? fresh : made;
 }
 
 BlockRef VoxelTable::block(VoxelKey key, bool create) {
   const VoxelKey origin = block_origin(key);
   const int log = block_log(key.level(), brick_level_);
-  if (VoxelData* found = find_block(origin.bits)) return {origin, log, found};
-  if (!create) return {origin, log, nullptr};
-  VoxelData* const voxels = allocate(std::size_t{1} << (3 * log));
-  ++blocks_;
-  if ((blocks_ + 1) * 10 > index_.size() * 7)
-    reindex(index_.empty() ? 16 : index_.size() * 2);
-  insert_slot(origin.bits, voxels);
-  return {origin, log, voxels};
+  BlockGroup* const g = group(key, create);
+  if (!g) return {origin, log, nullptr};
+  std::atomic<VoxelData*>& part = g->part[group_part(key, brick_level_)];
+  VoxelData* v = part.load(std::memory_order_acquire);
+  if (!v && create) {
+    // The caller holds the lock that guards the index, but integration's threads may be making
+    // blocks of this table without it (make_part_shared): the same atomic steps as theirs.
+    VoxelData* const fresh = part_voxels(log, false, nullptr, 0, nullptr);
+    v = part.compare_exchange_strong(v, fresh, std::memory_order_acq_rel, std::memory_order_acquire) ? fresh : v;
+  }
+  return {origin, log, v};
 }
 
 const VoxelData* VoxelTable::find(VoxelKey key) const {
-  const VoxelKey origin = block_origin(key);
-  VoxelData* const voxels = find_block(origin.bits);
+  const BlockGroup* const g =
+      find_group(aligned_origin(key, tile_block_log(key.level(), brick_level_)).bits);
+  if (!g) return nullptr;
+  VoxelData* const voxels = g->part[group_part(key, brick_level_)].load(std::memory_order_acquire);
   if (!voxels) return nullptr;
-  const VoxelData& v = BlockRef{origin, block_log(key.level(), brick_level_), voxels}.at(key);
+  const VoxelData& v = BlockRef{block_origin(key), block_log(key.level(), brick_level_), voxels}.at(key);
   return v.weight != 0 ? &v : nullptr;
 }
 
@@ -91,28 +179,25 @@ VoxelData& VoxelTable::find_or_insert(VoxelKey key) { return block(key, true).at
 
 void VoxelTable::compact() {
   VoxelTable kept(brick_level_);
-  for (const Slot& s : index_) {
-    if (s.key == kEmpty) continue;
-    const std::size_t n = std::size_t{1} << (3 * block_log(VoxelKey{s.key}.level(), brick_level_));
+  for_each_block([&](VoxelKey origin, int log, const VoxelData* v) {
+    VoxelData* const voxels = const_cast<VoxelData*>(v);
+    const std::size_t n = std::size_t{1} << (3 * log);
     bool any = false;
     for (std::size_t i = 0; i < n; ++i) {
-      if (s.voxels[i].erased()) s.voxels[i] = VoxelData{};
-      any = any || s.voxels[i].live();
+      if (voxels[i].erased()) voxels[i] = VoxelData{};
+      any = any || voxels[i].live();
     }
-    if (!any) continue;
-    VoxelData* const to = kept.block(VoxelKey{s.key}, true).data;
-    std::copy(s.voxels, s.voxels + n, to);
-  }
+    if (any) std::copy(voxels, voxels + n, kept.block(origin, true).data);
+  });
   *this = std::move(kept);
 }
 
 void VoxelTable::clear() {
   std::vector<Slot>().swap(index_);
   std::vector<std::unique_ptr<void, FreeChunk>>().swap(chunks_);
-  next_ = nullptr;
-  room_ = 0;
+  for (std::atomic<ChunkHead*>& c : current_) c.store(nullptr, std::memory_order_relaxed);
   chunk_bytes_ = 0;
-  blocks_ = 0;
+  groups_ = 0;
 }
 
 }  // namespace sf

@@ -1,23 +1,31 @@
 #pragma once
-// The voxels of one brick, stored as dense blocks of up to 4x4x4 voxels of one level.
+// The voxels of one brick, stored as dense blocks of up to 2x2x2 voxels of one level.
 //
 // Integration touches voxels in bands a few cells thick, so neighbouring voxels are written
 // together: a dense block turns most of those writes into stores next to the previous one, where
 // a hash table of single voxels costs a random probe each (the reason session 1's integration was
 // memory-bound). A block index (open addressing) maps a block's origin key to its voxels.
 //
-// Block shape: a block of level l holds 2^k voxels per axis with k = clamp(l - brick_level, 0, 2),
+// Block shape: a block of level l holds 2^k voxels per axis with k = clamp(l - brick_level, 0, 1),
 // aligned to multiples of 2^k. A brick holds 2^(l - brick_level) voxels of level l per axis, so a
 // block never straddles two bricks; levels at or above the brick level get one-voxel blocks (there
-// are few such voxels).
+// are few such voxels). Blocks were 4x4x4 until session 41: a band a few voxels thick fills half
+// of such a block's slots and three quarters of a 2x2x2 one's, and every slot is fresh memory
+// once, which a virtual machine's host hands out slowly (bench/README.md, session 41). The index
+// holds groups of the eight blocks of a 4x4x4 region (BlockGroup), and tiles keep 4x4x4 blocks
+// (tile_block_log): tile_file.cc writes a group as its tile block and reads one into its blocks.
 //
 // A voxel is absent while its weight is 0 (every contribution carries a positive weight), live
 // while it is > 0 and erased when < 0. Pointers to voxels stay valid until compact() or clear():
 // blocks' voxels live in an arena of chunks that never move.
+#include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <vector>
 #if defined(__SSE2__) && defined(__x86_64__)
 #include <emmintrin.h>
@@ -198,18 +206,27 @@ inline void accumulate4(VoxelData* const v[4], const float distance[4], const fl
 }
 #endif
 
-inline constexpr int kMaxBlockLog = 2;
+inline constexpr int kMaxBlockLog = 1;   // in memory
+inline constexpr int kTileBlockLog = 2;  // in tiles (storage/tile_file.h)
 
-// log2 of a block's edge in voxels for `level` (see above).
+// log2 of a block's edge in voxels for `level`, in memory (see above) and in tiles.
 constexpr int block_log(int level, int brick_level) {
   const int k = level - brick_level;
   return k < 0 ? 0 : (k > kMaxBlockLog ? kMaxBlockLog : k);
 }
+constexpr int tile_block_log(int level, int brick_level) {
+  const int k = level - brick_level;
+  return k < 0 ? 0 : (k > kTileBlockLog ? kTileBlockLog : k);
+}
 
+// The origin of the block of edge 2^log holding `key`.
+inline VoxelKey aligned_origin(VoxelKey key, int log) {
+  const std::uint32_t m = ~((1u << log) - 1);
+  return VoxelKey::make(key.level(), key.x() & m, key.y() & m, key.z() & m);
+}
 // The origin of the block holding `key` (the one rule; VoxelTable and integration both use it).
 inline VoxelKey block_origin(VoxelKey key, int brick_level) {
-  const std::uint32_t m = ~((1u << block_log(key.level(), brick_level)) - 1);
-  return VoxelKey::make(key.level(), key.x() & m, key.y() & m, key.z() & m);
+  return aligned_origin(key, block_log(key.level(), brick_level));
 }
 
 // A block's voxels, addressed relative to its origin.
@@ -223,21 +240,74 @@ struct BlockRef {
   }
 };
 
+// The blocks of one tile block (a 4^3 region at the finer levels: eight 2^3 blocks; a single block
+// at the coarser ones), each made when a voxel in it is first written. The table's index holds
+// groups, so that integration looks up a 4^3 region once and finds its blocks here, as it did
+// when blocks were 4^3. Integration reads and makes a group's blocks without the brick's lock
+// (VoxelTable::make_part_shared), hence the atomics.
+struct BlockGroup {
+  std::atomic<VoxelData*> part[8] = {};
+};
+static_assert(sizeof(BlockGroup) == 64, "a group is one cache line");
+static_assert(kTileBlockLog - kMaxBlockLog == 1, "a group holds at most 2 blocks per axis");
+
+// A full group's voxels seen as its tile block: voxel i of part o of a group (q = 8 o + i) is voxel
+// kGroupToTile[q] of the 4^3 tile block (x fastest), and kTileToGroup is the way back, so that
+// tiles are written from and read into a group's blocks without copying through a 4^3 array.
+inline constexpr std::array<std::uint8_t, 64> kGroupToTile = [] {
+  std::array<std::uint8_t, 64> t{};
+  for (int q = 0; q < 64; ++q) {
+    const int o = q >> 3, i = q & 7;
+    const int x = (o & 1) << 1 | (i & 1), y = (o >> 1 & 1) << 1 | (i >> 1 & 1), z = (o >> 2) << 1 | (i >> 2);
+    t[q] = std::uint8_t(z << 4 | y << 2 | x);
+  }
+  return t;
+}();
+inline constexpr std::array<std::uint8_t, 64> kTileToGroup = [] {
+  std::array<std::uint8_t, 64> t{};
+  for (int q = 0; q < 64; ++q) t[kGroupToTile[q]] = std::uint8_t(q);
+  return t;
+}();
+
+// Which block of its group holds `key`: x, y and z's bit at the block's edge (0 where the group is
+// one block).
+inline int group_part(VoxelKey key, int brick_level) {
+  const int log = block_log(key.level(), brick_level);
+  if (tile_block_log(key.level(), brick_level) == log) return 0;
+  return int((key.x() >> log) & 1) | int(((key.y() >> log) & 1) << 1) | int(((key.z() >> log) & 1) << 2);
+}
+
 class VoxelTable {
  public:
   explicit VoxelTable(int brick_level) : brick_level_(brick_level) {}
+  VoxelTable(VoxelTable&& other) noexcept;
+  VoxelTable& operator=(VoxelTable&& other) noexcept;
 
   int brick_level() const { return brick_level_; }
-  std::size_t block_count() const { return blocks_; }
+  std::size_t block_count() const;        // blocks (a scan of the groups)
   std::size_t live_count() const;        // live voxels (a scan)
   // The arena's chunks and the index.
   std::size_t memory_bytes() const { return chunk_bytes_ + index_.capacity() * sizeof(Slot); }
+  std::size_t group_count() const { return groups_; }
 
   // The origin of the block holding `key`.
   VoxelKey block_origin(VoxelKey key) const { return sf::block_origin(key, brick_level_); }
 
   // The block holding `key`; null data if absent and !create.
   BlockRef block(VoxelKey key, bool create);
+  // Room in the index for `groups` groups without regrowing (a tile's reader knows its count).
+  void reserve(std::size_t groups);
+  // The group of the tile block holding `key` (tile_block_log); null if absent and !create.
+  BlockGroup* group(VoxelKey key, bool create);
+  // Block `group_part(key)` of `group` (this table's group of `key`), made if absent, by a caller
+  // that has the table to itself (reading a tile).
+  VoxelData* make_part(BlockGroup& group, VoxelKey key);
+  // Block `part` of `group`, of edge 2^log, made if absent while other threads may make blocks of
+  // the table's groups: `lock` guards the index (the caller does not hold it), each thread carves
+  // from the chunk of its `cursor` (any number: threads sharing one stay correct, they only
+  // contend), and *grown receives the bytes of any chunk added (memory_bytes' growth).
+  VoxelData* make_part_shared(BlockGroup& group, int part, int log, std::mutex& lock, unsigned cursor,
+                              std::int64_t* grown);
 
   // The voxel if present (live or erased), else null.
   VoxelData* find(VoxelKey key);
@@ -254,30 +324,44 @@ class VoxelTable {
   template <class F>
   void for_each_block(F&& f) const {
     for (const Slot& s : index_)
-      if (s.key != kEmpty) {
-        const VoxelKey origin{s.key};
-        f(origin, block_log(origin.level(), brick_level_), static_cast<const VoxelData*>(s.voxels));
-      }
+      if (s.key != kEmpty) visit_parts(VoxelKey{s.key}, *s.group, f);
+  }
+
+  // Visits every group: f(VoxelKey origin of its tile block, const BlockGroup&), in index order.
+  template <class F>
+  void for_each_group(F&& f) const {
+    for (const Slot& s : index_)
+      if (s.key != kEmpty) f(VoxelKey{s.key}, static_cast<const BlockGroup&>(*s.group));
   }
 
   // Visits every live voxel: f(VoxelKey, VoxelData&), block by block.
   template <class F>
   void for_each(F&& f) {
-    for (const Slot& s : index_)
-      if (s.key != kEmpty) visit(VoxelKey{s.key}, s.voxels, f);
+    for_each_block([&](VoxelKey origin, int log, const VoxelData* v) { visit(origin, log, const_cast<VoxelData*>(v), f); });
   }
   template <class F>
   void for_each(F&& f) const {
-    for (const Slot& s : index_)
-      if (s.key != kEmpty) visit(VoxelKey{s.key}, static_cast<const VoxelData*>(s.voxels), f);
+    for_each_block([&](VoxelKey origin, int log, const VoxelData* v) { visit(origin, log, v, f); });
   }
 
  private:
   static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};  // no valid key has all bits set
 
+  template <class F>
+  void visit_parts(VoxelKey origin, const BlockGroup& g, F& f) const {
+    const int log = block_log(origin.level(), brick_level_);
+    const int parts = tile_block_log(origin.level(), brick_level_) == log ? 1 : 8;
+    for (int o = 0; o < parts; ++o) {
+      const VoxelData* v = g.part[o].load(std::memory_order_relaxed);
+      if (!v) continue;
+      const std::uint32_t dx = std::uint32_t(o & 1) << log, dy = std::uint32_t(o >> 1 & 1) << log,
+                          dz = std::uint32_t(o >> 2) << log;
+      f(VoxelKey::make(origin.level(), origin.x() + dx, origin.y() + dy, origin.z() + dz), log, v);
+    }
+  }
   template <class V, class F>
-  void visit(VoxelKey origin, V* voxels, F& f) const {
-    const std::uint32_t n = 1u << block_log(origin.level(), brick_level_);
+  static void visit(VoxelKey origin, int log, V* voxels, F& f) {
+    const std::uint32_t n = 1u << log;
     std::size_t i = 0;
     for (std::uint32_t z = 0; z < n; ++z)
       for (std::uint32_t y = 0; y < n; ++y)
@@ -285,36 +369,56 @@ class VoxelTable {
           if (voxels[i].live())
             f(VoxelKey::make(origin.level(), origin.x() + x, origin.y() + y, origin.z() + z), voxels[i]);
   }
-  // The block index, which is also the only record of a block: its origin key and its voxels, side
-  // by side, so that a lookup reads one cache line; a block's edge follows from its level.
+  // The index: a tile block's origin key and its group, side by side, so that a lookup reads one
+  // cache line.
   struct Slot {
     std::uint64_t key;
-    VoxelData* voxels;
+    BlockGroup* group;
   };
-  VoxelData* find_block(std::uint64_t origin) const;  // the block's voxels, or null
+  BlockGroup* find_group(std::uint64_t origin) const;  // null if absent
   void reindex(std::size_t capacity);
-  void insert_slot(std::uint64_t origin, VoxelData* voxels);
-  // `voxels` zeroed voxels from the arena, aligned to a cache line.
-  VoxelData* allocate(std::size_t voxels);
+  void insert_slot(std::uint64_t origin, BlockGroup* group);
+  // `bytes` zeroed bytes from the arena, aligned to a cache line, from the chunk of `cursor`. Safe
+  // while other threads allocate with `lock` (taken to add a chunk; null if the caller holds it),
+  // unless `alone` (the caller has the table to itself: no atomic read-modify-write, which the
+  // profile showed as most of a block's making). A new chunk's bytes are added to *grown.
+  void* allocate(std::size_t bytes, bool alone, std::mutex* lock = nullptr, std::int64_t* grown = nullptr,
+                 unsigned cursor = 0);
+  VoxelData* part_voxels(int log, bool alone, std::mutex* lock, unsigned cursor, std::int64_t* grown);
 
-  // The arena: blocks' voxels in chunks that never move (pointers stay valid until compact() or
-  // clear()), zeroed by calloc (all zero bytes are VoxelData{}, an implicit-lifetime type that
-  // calloc's memory holds without a constructor). One heap allocation per block cost a 16-byte
-  // header each, a call to malloc and a memset, and a block record beside the index; the chunks
-  // grow from 2 KiB to 32 KiB, so that a brick with few voxels does not hold a large chunk half
-  // empty (a city job has some 35,000 bricks).
+  // The arena: groups and blocks' voxels in chunks that never move (pointers stay valid until
+  // compact() or clear()), zeroed by calloc (all zero bytes are VoxelData{} and BlockGroup{},
+  // implicit-lifetime types that calloc's memory holds without a constructor). One heap allocation
+  // per block cost a 16-byte header each, a call to malloc and a memset, and a block record beside
+  // the index; the chunks grow from 2 KiB to 32 KiB, so that a brick with few voxels does not hold
+  // a large chunk half empty (a city job has some 35,000 bricks).
+  //
+  // Integration makes a group's blocks without the brick's lock (make_part_shared): blocks are
+  // carved by a fetch_add on the used count of a chunk, and only a new chunk is made under the
+  // lock. Each thread carves from a chunk of its own (kCursors of them, by thread index), as two
+  // cores adding to one count passed its cache line back and forth (city eighth, 2 threads: making
+  // blocks fell from 2.5 to 1.8 % of the samples). Groups and the index change under the lock
+  // alone.
   struct FreeChunk {
     void operator()(void* p) const { std::free(p); }
   };
-  static constexpr std::size_t kFirstChunkVoxels = 128, kMaxChunkVoxels = 2048;
+  struct alignas(64) ChunkHead {  // at the start of each chunk, its bytes after it
+    std::atomic<std::size_t> used{0};
+    std::size_t size = 0;
+    unsigned char* bytes() { return reinterpret_cast<unsigned char*>(this + 1); }
+  };
+  static constexpr std::size_t kFirstChunkBytes = 2048, kMaxChunkBytes = 32768;
+  static constexpr unsigned kCursors = 4;
+  // A new chunk of at least `bytes` for `cursor` (callers hold the lock, if any); returns the
+  // bytes it adds.
+  std::size_t grow(std::size_t bytes, unsigned cursor);
 
   int brick_level_;
   std::vector<std::unique_ptr<void, FreeChunk>> chunks_;
-  VoxelData* next_ = nullptr;  // the unused rest of the last chunk
-  std::size_t room_ = 0;       // voxels there
+  std::atomic<ChunkHead*> current_[kCursors] = {};  // the chunks blocks are carved from
   std::size_t chunk_bytes_ = 0;
-  std::size_t blocks_ = 0;
-  std::vector<Slot> index_;  // open addressing: origin key -> the block's voxels
+  std::size_t groups_ = 0;
+  std::vector<Slot> index_;  // open addressing: tile block origin key -> its group
 };
 
 }  // namespace sf

@@ -6,10 +6,13 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
-#include <memory>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <random>
 #include <set>
+
+#include <tbb/parallel_invoke.h>
 
 #include "storage/tile_store.h"
 #include "test_util.h"
@@ -253,16 +256,23 @@ TEST(BrickMap, BrickOfVoxelsOfAllLevels) {
 }
 
 TEST(VoxelTable, BlockShapeFollowsTheBrickLevel) {
-  // Brick level 4: level 4 and coarser get single voxels, level 5 2^3 blocks, level 6 and finer
-  // 4^3 blocks (never straddling a brick: a brick holds 2^(l - 4) voxels of level l per axis).
+  // Brick level 4: level 4 and coarser get single voxels, level 5 and finer 2^3 blocks in memory
+  // (never straddling a brick: a brick holds 2^(l - 4) voxels of level l per axis); tiles keep
+  // 4^3 blocks from level 6.
   EXPECT_EQ(block_log(2, 4), 0);
   EXPECT_EQ(block_log(4, 4), 0);
   EXPECT_EQ(block_log(5, 4), 1);
-  EXPECT_EQ(block_log(6, 4), 2);
+  EXPECT_EQ(block_log(6, 4), 1);
   EXPECT_EQ(block_log(12, 4), kMaxBlockLog);
+  EXPECT_EQ(tile_block_log(4, 4), 0);
+  EXPECT_EQ(tile_block_log(5, 4), 1);
+  EXPECT_EQ(tile_block_log(6, 4), 2);
+  EXPECT_EQ(tile_block_log(12, 4), kTileBlockLog);
+  EXPECT_EQ(aligned_origin(VoxelKey::make(9, 13, 6, 7), 2), VoxelKey::make(9, 12, 4, 4));
   VoxelTable t(4);
-  EXPECT_EQ(t.block_origin(VoxelKey::make(9, 13, 6, 7)), VoxelKey::make(9, 12, 4, 4));
+  EXPECT_EQ(t.block_origin(VoxelKey::make(9, 13, 6, 7)), VoxelKey::make(9, 12, 6, 6));
   EXPECT_EQ(t.block_origin(VoxelKey::make(5, 13, 6, 7)), VoxelKey::make(5, 12, 6, 6));
+  EXPECT_EQ(t.block_origin(VoxelKey::make(4, 13, 6, 7)), VoxelKey::make(4, 13, 6, 7));
   t.find_or_insert(VoxelKey::make(9, 13, 6, 7)).weight = 2;
   EXPECT_EQ(t.block_count(), 1u);
   EXPECT_EQ(t.find(VoxelKey::make(9, 12, 6, 7)), nullptr);  // same block, never written: absent
@@ -288,17 +298,69 @@ TEST(VoxelTable, PointersIntoBlocksOutliveGrowth) {
   EXPECT_EQ(t.live_count(), 20001u);
 }
 
+TEST(VoxelTable, GroupBlocksMapToTheirTileBlock) {
+  // Voxel i of block o of a group (q = 8 o + i; o and i both x + 2 y + 4 z) against its place
+  // (x + 4 y + 16 z) in the 4^3 tile block, worked out by hand.
+  EXPECT_EQ(kGroupToTile[0], 0);
+  EXPECT_EQ(kGroupToTile[1], 1);        // block 0, x 1
+  EXPECT_EQ(kGroupToTile[8], 2);        // block 1 (x 2), voxel 0
+  EXPECT_EQ(kGroupToTile[8 * 2 + 1], 9);   // block 2 (y 2), x 1: 1 + 4 * 2
+  EXPECT_EQ(kGroupToTile[8 * 4 + 6], 52);  // block 4 (z 2), y 1 z 1: 4 * 1 + 16 * 3
+  EXPECT_EQ(kGroupToTile[63], 63);
+  for (int q = 0; q < 64; ++q) EXPECT_EQ(kTileToGroup[kGroupToTile[q]], q);
+}
+
+TEST(VoxelTable, BlocksMadeByTwoThreadsAtOnceAreOnePerPlace) {
+  // Integration makes a group's blocks without the brick's lock (make_part_shared): two threads
+  // making the same blocks at once must get the same block for each place, every voxel either
+  // writes must be found after, and the bytes each reports added must sum to the table's growth.
+  VoxelTable t(4);
+  std::mutex lock;
+  std::vector<BlockGroup*> groups;
+  for (std::uint32_t i = 0; i < 4000; ++i) groups.push_back(t.group(VoxelKey::make(10, 4 * i, 0, 0), true));
+  const std::size_t before = t.memory_bytes();
+  std::vector<VoxelData*> made[2];
+  std::int64_t grown[2] = {0, 0};
+  auto make = [&](int side) {
+    for (BlockGroup* g : groups)
+      for (int o = 0; o < 8; ++o) {
+        VoxelData* v = t.make_part_shared(*g, o, 1, lock, unsigned(side), &grown[side]);
+        v[side].weight = float(side + 1);  // voxel 0 by one thread, voxel 1 by the other
+        made[side].push_back(v);
+      }
+  };
+  tbb::parallel_invoke([&] { make(0); }, [&] { make(1); });
+  EXPECT_EQ(made[0], made[1]);
+  EXPECT_EQ(t.block_count(), groups.size() * 8);
+  EXPECT_EQ(t.memory_bytes(), before + std::size_t(grown[0] + grown[1]));
+  for (std::uint32_t i = 0; i < 4000; ++i)
+    for (std::uint32_t x = 0; x < 4; x += 2)
+      for (std::uint32_t y = 0; y < 4; y += 2)
+        for (std::uint32_t z = 0; z < 4; z += 2) {
+          const VoxelData* a = t.find(VoxelKey::make(10, 4 * i + x, y, z));
+          const VoxelData* b = t.find(VoxelKey::make(10, 4 * i + x + 1, y, z));
+          ASSERT_TRUE(a && b);
+          EXPECT_EQ(a->weight, 1.0f);
+          EXPECT_EQ(b->weight, 2.0f);
+        }
+}
+
 TEST(VoxelTable, GrowsFindsAndCompacts) {
   VoxelTable t(4);
   for (std::uint32_t i = 0; i < 1000; ++i) t.find_or_insert(VoxelKey::make(10, i, i % 7, 3)).weight = float(i + 1);
   EXPECT_EQ(t.live_count(), 1000u);
-  // Level 10 with brick level 4: blocks of 4^3 voxels, so x = 0..999 spans 250 blocks, and y = 0..6
-  // two: the 250 x-blocks over (i % 7) < 4 or >= 4 give 250 + (blocks holding both) in total.
+  // Level 10 with brick level 4: blocks of 2^3 voxels, so x = 0..999 spans 500 blocks, and y = 0..6
+  // four (z = 3 one): a block per distinct pair (x / 2, y / 2).
   std::set<std::pair<std::uint32_t, std::uint32_t>> blocks;
-  for (std::uint32_t i = 0; i < 1000; ++i) blocks.insert({i / 4, (i % 7) / 4});
+  for (std::uint32_t i = 0; i < 1000; ++i) blocks.insert({i / 2, (i % 7) / 2});
   EXPECT_EQ(t.block_count(), blocks.size());
   for (std::uint32_t i = 0; i < 1000; i += 2) t.find(VoxelKey::make(10, i, i % 7, 3))->weight = -1;
+  // Blocks left with erased voxels only are dropped: those whose voxels all had even x.
+  std::set<std::pair<std::uint32_t, std::uint32_t>> kept;
+  for (std::uint32_t i = 1; i < 1000; i += 2) kept.insert({i / 2, (i % 7) / 2});
   t.compact();
+  EXPECT_EQ(t.block_count(), kept.size());
+  EXPECT_LT(kept.size(), blocks.size());
   EXPECT_EQ(t.live_count(), 500u);
   EXPECT_EQ(t.find(VoxelKey::make(10, 2, 2, 3)), nullptr);
   ASSERT_NE(t.find(VoxelKey::make(10, 3, 3, 3)), nullptr);

@@ -94,8 +94,12 @@ TEST(BrickStore, SpillingUnderATinyBudgetChangesNoVoxel) {
     EXPECT_EQ(half.resident_bytes(), recount(half));
     EXPECT_LE(half.resident_bytes(), full / 2 - full / 16);
     EXPECT_GT(half.resident_bytes(), full / 4);
+    // Reloaded bricks hold their voxels packed (a tile's reader carves from one chunk at a time
+    // and sizes the index once), so they may take less than integration left them with.
     half.load_all();
-    EXPECT_EQ(half.resident_bytes(), full);
+    EXPECT_EQ(half.resident_bytes(), recount(half));
+    EXPECT_LE(half.resident_bytes(), full);
+    EXPECT_GT(half.resident_bytes(), full / 2);
   }
   EXPECT_GT(spilled.spill_stats().spilled, 10u);
   EXPECT_GT(spilled.spill_stats().reloaded, 10u);
