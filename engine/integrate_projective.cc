@@ -122,7 +122,15 @@ class BlockCache {
     Entry& e = slots_[std::hash<VoxelKey>{}(origin) & (kSlots - 1)];
     if (!e.group || e.origin != origin) {
       e.origin = origin;
-      e.group = map_.group(key, &e.brick);
+      // The brick too is mostly the one of the group before: its lookup (a shared lock and a
+      // hash map) was a third of a group's fetch.
+      const std::uint64_t brick_id = brick_of(key, map_.brick_level()).packed();
+      if (brick_id != brick_id_) {
+        brick_ = &map_.brick(BrickCoord::unpack(brick_id));
+        brick_id_ = brick_id;
+      }
+      e.brick = brick_;
+      e.group = map_.group(*brick_, key);
       // A group fetched here was last written by another depth map, long out of the caches: ask
       // for all its blocks' lines at once rather than one miss after another as a column reaches
       // them.
@@ -146,6 +154,8 @@ class BlockCache {
   static constexpr std::size_t kSlots = 256;
   BrickMap& map_;
   const unsigned thread_;
+  std::uint64_t brick_id_ = ~std::uint64_t{0};  // the brick of the last group fetched (no brick has this id)
+  Brick* brick_ = nullptr;
   Entry slots_[kSlots];
 };
 

@@ -116,6 +116,10 @@ BlockRef BrickMap::block(VoxelKey key) {
 BlockGroup* BrickMap::group(VoxelKey key, Brick** brick_out) {
   Brick& b = brick(brick_of(key, brick_level_));
   *brick_out = &b;
+  return group(b, key);
+}
+
+BlockGroup* BrickMap::group(Brick& b, VoxelKey key) {
   std::lock_guard lock(b.mutex);
   make_resident(b);
   b.dirty = true;

@@ -126,6 +126,8 @@ class BrickMap {
   // as block(). Integration keeps a group and its brick at hand and reads and makes the group's
   // blocks without the brick's lock (BlockGroup).
   BlockGroup* group(VoxelKey key, Brick** brick);
+  BlockGroup* group(Brick& brick, VoxelKey key);  // `key` in `brick`, which the caller has at hand
+  Brick& brick(BrickCoord c);  // the brick at `c`, made (empty) if absent; it lives until clear() or compact()
   VoxelData* part(Brick& brick, BlockGroup& group, int part, int log, unsigned thread);
 
   const VoxelData* find(VoxelKey key) const;  // not safe concurrently with apply()
@@ -190,7 +192,6 @@ class BrickMap {
   }
 
  private:
-  Brick& brick(BrickCoord c);
   const Brick* find_brick(BrickCoord c) const;
   void make_resident(Brick& b);   // caller holds b.mutex
   void write_tile_of(Brick& b);   // caller holds b.mutex (or has exclusive access)
