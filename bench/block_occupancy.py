@@ -4,8 +4,9 @@ shape. Reads the job's checkpoint tiles (formats 4 to 6, through bench/field_has
 its brick level (job.sqlite), and prints per level: blocks, block edge, present voxels, the share
 of a block's slots they fill, and for 4^3 blocks how many of their eight 2^3 octants hold a
 present voxel and how full those are; then the slots (16 bytes each, all zeroed when a block is
-made) the field holds now and would hold in 2^3 blocks. Headers, index slots and allocator chunks
-are not counted (they grow with the block count).
+made) the field would hold in the tiles' 4^3 blocks ("now": the table's blocks until session 41)
+and holds in 2^3 blocks (the table's since). Headers, index slots and allocator chunks are not
+counted (they grow with the block count).
 Usage: bench/block_occupancy.py JOB"""
 import os
 import sqlite3

@@ -121,7 +121,6 @@ class BlockCache {
   BlockGroup* group(VoxelKey key, VoxelKey origin, Brick** brick) {
     Entry& e = slots_[std::hash<VoxelKey>{}(origin) & (kSlots - 1)];
     if (!e.group || e.origin != origin) {
-      e.origin = origin;
       // The brick too is mostly the one of the group before: its lookup (a shared lock and a
       // hash map) was a third of a group's fetch.
       const std::uint64_t brick_id = brick_of(key, map_.brick_level()).packed();
@@ -129,8 +128,9 @@ class BlockCache {
         brick_ = &map_.brick(BrickCoord::unpack(brick_id));
         brick_id_ = brick_id;
       }
+      e.group = map_.group(*brick_, key);  // may throw (a damaged tile): the entry is set after
       e.brick = brick_;
-      e.group = map_.group(*brick_, key);
+      e.origin = origin;
       // A group fetched here was last written by another depth map, long out of the caches: ask
       // for all its blocks' lines at once rather than one miss after another as a column reaches
       // them.

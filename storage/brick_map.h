@@ -116,18 +116,16 @@ class BrickMap {
   // in a fixed order: then the result does not depend on thread timing.
   void apply(std::vector<Contribution>& batch);
 
-  // The block holding `key`, created if absent. Safe to call from several threads at once; the
-  // returned pointer stays valid until compact() or clear(). Writers must never touch the same
-  // voxel concurrently (integration guarantees it: one contribution per voxel per depth map).
-  BlockRef block(VoxelKey key);
-  // The group of blocks holding `key` (VoxelTable::group), created if absent, and its brick; and
-  // block `part` (edge 2^log) of a group of `brick`, created if absent, by the thread of index
-  // `thread` in its task arena (it picks the chunk the block is carved from): the same guarantees
-  // as block(). Integration keeps a group and its brick at hand and reads and makes the group's
-  // blocks without the brick's lock (BlockGroup).
-  BlockGroup* group(VoxelKey key, Brick** brick);
-  BlockGroup* group(Brick& brick, VoxelKey key);  // `key` in `brick`, which the caller has at hand
-  Brick& brick(BrickCoord c);  // the brick at `c`, made (empty) if absent; it lives until clear() or compact()
+  // For integration's threads, which keep a brick and a group at hand and read and make the
+  // group's blocks without the brick's lock (BlockGroup): the brick at `c`, made (empty) if absent
+  // (it lives until clear() or compact()); the group of blocks holding `key`, a voxel of `brick`,
+  // created if absent (VoxelTable::group); and block `part` (edge 2^log) of a group of `brick`,
+  // created if absent, by the thread of index `thread` in its task arena (it picks the chunk the
+  // block is carved from). Safe to call from several threads at once; pointers stay valid until
+  // compact() or clear(). Writers must never touch the same voxel concurrently (integration
+  // guarantees it: one contribution per voxel per depth map).
+  Brick& brick(BrickCoord c);
+  BlockGroup* group(Brick& brick, VoxelKey key);
   VoxelData* part(Brick& brick, BlockGroup& group, int part, int log, unsigned thread);
 
   const VoxelData* find(VoxelKey key) const;  // not safe concurrently with apply()
@@ -216,8 +214,9 @@ class BrickMap {
   // Atomic: bricks are reloaded by integration workers, each holding only its brick's mutex.
   std::atomic<std::size_t> spilled_{0}, reloaded_{0};
   std::atomic<std::uint64_t> bytes_written_{0}, bytes_read_{0};
-  // Σ over resident bricks of their blocks, index and Brick, kept up to date as blocks are made,
-  // bricks load and spill, so that enforce_limit() costs nothing while under the limit.
+  // Σ over resident bricks of their arena chunks, group index and Brick, kept up to date as groups
+  // and chunks are made, bricks load and spill, so that enforce_limit() costs nothing while under
+  // the limit.
   std::atomic<std::int64_t> resident_bytes_{0};
   mutable std::shared_mutex bricks_mutex_;
   std::unordered_map<std::uint64_t, std::unique_ptr<Brick>> bricks_;

@@ -491,6 +491,8 @@ class BlockDecoder {
     // record goes to its place in the group's blocks (kTileToGroup), and only the blocks holding a
     // voxel are made. Tiles without presence masks (versions 1-3) store absent voxels too: those
     // tile blocks are decoded into `gathered_` and split.
+    // The group is made even for a block with no voxel, as the 4^3 table made the block, so that
+    // a tile read and written again keeps its bytes.
     const int table_log = block_log(level, brick_level_);
     const bool by_part = table_log != log && stores_presence(version_);
     VoxelData* data = nullptr;
@@ -498,9 +500,12 @@ class BlockDecoder {
     VoxelData* parts[8] = {};
     if (table_log == log) {
       data = out_.block(origin, true).data;
-    } else if (!by_part) {
-      data = gathered_;
-      std::fill_n(gathered_, n, VoxelData{});
+    } else {
+      group = out_.group(origin, true);
+      if (!by_part) {
+        data = gathered_;
+        std::fill_n(gathered_, n, VoxelData{});
+      }
     }
     for (std::uint64_t m = present; m != 0; m &= m - 1, p += record) {
       const int t = std::countr_zero(m);
@@ -510,7 +515,6 @@ class BlockDecoder {
       } else {
         const int q = kTileToGroup[t], o = q >> 3;
         if (!parts[o]) {
-          if (!group) group = out_.group(origin, true);
           const std::uint32_t dx = std::uint32_t(o & 1) << table_log, dy = std::uint32_t(o >> 1 & 1) << table_log,
                               dz = std::uint32_t(o >> 2) << table_log;
           parts[o] = out_.make_part(*group, VoxelKey::make(level, origin.x() + dx, origin.y() + dy, origin.z() + dz));
@@ -617,9 +621,13 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
   if ((!stores_chunks(version) && raw_size > std::uint64_t(LZ4_MAX_INPUT_SIZE)) || raw_size > 255 * stored_size + 16)
     throw bad("implausible raw size " + std::to_string(raw_size));
   if (out.group_count() != 0) throw std::logic_error(name + ": read_tile into a non-empty table");
-  // A block takes at least 8 raw bytes (its key), so a damaged count cannot reserve more than the
-  // payload could hold.
-  out.reserve(std::min<std::uint64_t>(block_count, raw_size / 8));
+  // The index is sized once for the blocks to come, but only by bytes decompressed and checked: a
+  // block takes at least its key and mask (16 raw bytes; 8 without masks), so neither a damaged
+  // count nor a damaged raw size reserves more than the payload holds.
+  const std::uint64_t least_block_bytes = stores_presence(version) ? 16 : 8;
+  const auto reserve_for = [&](std::uint64_t raw_bytes) {
+    out.reserve(std::min<std::uint64_t>(block_count, out.group_count() + raw_bytes / least_block_bytes));
+  };
   BlockDecoder decoder(name, version, brick_level, coord, block_count, out);
   try {
     if (stores_chunks(version)) {
@@ -655,6 +663,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
                                           reinterpret_cast<char*>(unpacked), int(stored_n), int(raw_n));
         if (n < 0 || std::uint32_t(n) != raw_n) throw bad(which + " does not decompress to its stated size");
         if (stores_planes(version)) from_byte_planes(planes.data(), raw_n / kPlaneUnit, raw.data());
+        reserve_for(raw_n);
         // A chunk holds whole blocks.
         const unsigned char* p = raw.data();
         const unsigned char* end = p + raw_n;
@@ -677,6 +686,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
       const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(stored.data()),
                                         reinterpret_cast<char*>(raw.data()), int(stored_size), int(raw_size));
       if (n < 0 || std::uint64_t(n) != raw_size) throw bad("LZ4 payload does not decompress to its stated size");
+      reserve_for(raw_size);
     }
     const unsigned char* p = raw.data();
     const unsigned char* end = raw.data() + raw.size();

@@ -43,12 +43,12 @@ VoxelTable::VoxelTable(VoxelTable&& other) noexcept : brick_level_(other.brick_l
 VoxelTable& VoxelTable::operator=(VoxelTable&& other) noexcept {
   if (this == &other) return *this;
   brick_level_ = other.brick_level_;
-  chunks_ = std::move(other.chunks_);
+  chunks_ = std::exchange(other.chunks_, {});
   for (unsigned c = 0; c < kCursors; ++c)
     current_[c].store(other.current_[c].exchange(nullptr, std::memory_order_relaxed), std::memory_order_relaxed);
   chunk_bytes_ = std::exchange(other.chunk_bytes_, 0);
   groups_ = std::exchange(other.groups_, 0);
-  index_ = std::move(other.index_);
+  index_ = std::exchange(other.index_, {});
   return *this;
 }
 

@@ -4,14 +4,16 @@
 // Integration touches voxels in bands a few cells thick, so neighbouring voxels are written
 // together: a dense block turns most of those writes into stores next to the previous one, where
 // a hash table of single voxels costs a random probe each (the reason session 1's integration was
-// memory-bound). A block index (open addressing) maps a block's origin key to its voxels.
+// memory-bound). A group index (open addressing) maps the origin key of a 4x4x4 region to the
+// group of its blocks.
 //
 // Block shape: a block of level l holds 2^k voxels per axis with k = clamp(l - brick_level, 0, 1),
 // aligned to multiples of 2^k. A brick holds 2^(l - brick_level) voxels of level l per axis, so a
 // block never straddles two bricks; levels at or above the brick level get one-voxel blocks (there
-// are few such voxels). Blocks were 4x4x4 until session 41: a band a few voxels thick fills half
-// of such a block's slots and three quarters of a 2x2x2 one's, and every slot is fresh memory
-// once, which a virtual machine's host hands out slowly (bench/README.md, session 41). The index
+// are few such voxels). Blocks were 4x4x4 until session 41: a band a few voxels thick fills 33-60 %
+// of such a block's slots at the finer levels and 60-81 % of a 2x2x2 one's (igea, bench/README.md
+// session 40), and every slot is fresh memory once, which a virtual machine's host hands out
+// slowly (session 41). The index
 // holds groups of the eight blocks of a 4x4x4 region (BlockGroup), and tiles keep 4x4x4 blocks
 // (tile_block_log): tile_file.cc writes a group as its tile block and reads one into its blocks.
 //
@@ -295,7 +297,8 @@ class VoxelTable {
 
   // The block holding `key`; null data if absent and !create.
   BlockRef block(VoxelKey key, bool create);
-  // Room in the index for `groups` groups without regrowing (a tile's reader knows its count).
+  // Room in the index for `groups` groups without regrowing (a tile's reader, by the bytes it has
+  // decompressed).
   void reserve(std::size_t groups);
   // The group of the tile block holding `key` (tile_block_log); null if absent and !create.
   BlockGroup* group(VoxelKey key, bool create);
@@ -387,8 +390,9 @@ class VoxelTable {
   VoxelData* part_voxels(int log, bool alone, std::mutex* lock, unsigned cursor, std::int64_t* grown);
 
   // The arena: groups and blocks' voxels in chunks that never move (pointers stay valid until
-  // compact() or clear()), zeroed by calloc (all zero bytes are VoxelData{} and BlockGroup{},
-  // implicit-lifetime types that calloc's memory holds without a constructor). One heap allocation
+  // compact() or clear()), zeroed by calloc (all zero bytes are VoxelData{}, an implicit-lifetime
+  // type that calloc's memory holds without a constructor; groups and chunk heads, which hold
+  // atomics, are constructed in place). One heap allocation
   // per block cost a 16-byte header each, a call to malloc and a memset, and a block record beside
   // the index; the chunks grow from 2 KiB to 32 KiB, so that a brick with few voxels does not hold
   // a large chunk half empty (a city job has some 35,000 bricks).
@@ -397,8 +401,9 @@ class VoxelTable {
   // carved by a fetch_add on the used count of a chunk, and only a new chunk is made under the
   // lock. Each thread carves from a chunk of its own (kCursors of them, by thread index), as two
   // cores adding to one count passed its cache line back and forth (city eighth, 2 threads: making
-  // blocks fell from 2.5 to 1.8 % of the samples). Groups and the index change under the lock
-  // alone.
+  // blocks fell from 2.5 to 1.8 % of the samples); threads beyond kCursors, and group(), which
+  // carves from cursor 0 under the lock, share a chunk safely. Groups are made and the index
+  // changes under the lock alone.
   struct FreeChunk {
     void operator()(void* p) const { std::free(p); }
   };

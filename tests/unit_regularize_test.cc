@@ -6,13 +6,13 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
+#include <latch>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <random>
 #include <set>
-
-#include <tbb/parallel_invoke.h>
+#include <thread>
 
 #include "storage/tile_store.h"
 #include "test_util.h"
@@ -313,36 +313,74 @@ TEST(VoxelTable, GroupBlocksMapToTheirTileBlock) {
 TEST(VoxelTable, BlocksMadeByTwoThreadsAtOnceAreOnePerPlace) {
   // Integration makes a group's blocks without the brick's lock (make_part_shared): two threads
   // making the same blocks at once must get the same block for each place, every voxel either
-  // writes must be found after, and the bytes each reports added must sum to the table's growth.
-  VoxelTable t(4);
-  std::mutex lock;
-  std::vector<BlockGroup*> groups;
-  for (std::uint32_t i = 0; i < 4000; ++i) groups.push_back(t.group(VoxelKey::make(10, 4 * i, 0, 0), true));
-  const std::size_t before = t.memory_bytes();
-  std::vector<VoxelData*> made[2];
-  std::int64_t grown[2] = {0, 0};
-  auto make = [&](int side) {
-    for (BlockGroup* g : groups)
-      for (int o = 0; o < 8; ++o) {
-        VoxelData* v = t.make_part_shared(*g, o, 1, lock, unsigned(side), &grown[side]);
-        v[side].weight = float(side + 1);  // voxel 0 by one thread, voxel 1 by the other
-        made[side].push_back(v);
-      }
-  };
-  tbb::parallel_invoke([&] { make(0); }, [&] { make(1); });
-  EXPECT_EQ(made[0], made[1]);
-  EXPECT_EQ(t.block_count(), groups.size() * 8);
-  EXPECT_EQ(t.memory_bytes(), before + std::size_t(grown[0] + grown[1]));
-  for (std::uint32_t i = 0; i < 4000; ++i)
-    for (std::uint32_t x = 0; x < 4; x += 2)
-      for (std::uint32_t y = 0; y < 4; y += 2)
-        for (std::uint32_t z = 0; z < 4; z += 2) {
-          const VoxelData* a = t.find(VoxelKey::make(10, 4 * i + x, y, z));
-          const VoxelData* b = t.find(VoxelKey::make(10, 4 * i + x + 1, y, z));
-          ASSERT_TRUE(a && b);
-          EXPECT_EQ(a->weight, 1.0f);
-          EXPECT_EQ(b->weight, 2.0f);
+  // writes must be found after, and the bytes each reports added, with those of groups made
+  // meanwhile under the lock, must sum to the table's growth. Each thread on its own cursor, then
+  // both on cursor 0, which group() also carves from (under the lock, growing it without taking
+  // the lock) while the other thread carves without it. Plain threads started together by a
+  // latch, so that they run at once whatever the task scheduler would do.
+  for (const unsigned second_cursor : {1u, 0u}) {
+    SCOPED_TRACE(second_cursor);
+    VoxelTable t(4);
+    std::mutex lock;
+    std::vector<BlockGroup*> groups;
+    for (std::uint32_t i = 0; i < 4000; ++i) groups.push_back(t.group(VoxelKey::make(10, 4 * i, 0, 0), true));
+    const std::size_t before = t.memory_bytes();
+    std::vector<VoxelData*> made[2];
+    std::int64_t grown[2] = {0, 0}, grown_by_groups = 0;
+    std::latch start(2);
+    auto make = [&](int side, unsigned cursor) {
+      start.arrive_and_wait();
+      std::uint32_t more = 0;
+      for (BlockGroup* g : groups) {
+        for (int o = 0; o < 8; ++o) {
+          VoxelData* v = t.make_part_shared(*g, o, 1, lock, cursor, &grown[side]);
+          v[side].weight = float(side + 1);  // voxel 0 by one thread, voxel 1 by the other
+          made[side].push_back(v);
         }
+        if (side == 0) {  // a new group now and then, as integration makes them
+          std::lock_guard held(lock);
+          const std::size_t m = t.memory_bytes();
+          t.group(VoxelKey::make(10, 4 * more++, 8, 0), true);
+          grown_by_groups += std::int64_t(t.memory_bytes() - m);
+        }
+      }
+    };
+    std::thread a(make, 0, 0u), b(make, 1, second_cursor);
+    a.join();
+    b.join();
+    EXPECT_EQ(made[0], made[1]);
+    EXPECT_EQ(t.group_count(), 2 * groups.size());
+    EXPECT_EQ(t.block_count(), groups.size() * 8);
+    EXPECT_EQ(t.memory_bytes(), before + std::size_t(grown[0] + grown[1] + grown_by_groups));
+    for (std::uint32_t i = 0; i < 4000; ++i)
+      for (std::uint32_t x = 0; x < 4; x += 2)
+        for (std::uint32_t y = 0; y < 4; y += 2)
+          for (std::uint32_t z = 0; z < 4; z += 2) {
+            const VoxelData* va = t.find(VoxelKey::make(10, 4 * i + x, y, z));
+            const VoxelData* vb = t.find(VoxelKey::make(10, 4 * i + x + 1, y, z));
+            ASSERT_TRUE(va && vb);
+            EXPECT_EQ(va->weight, 1.0f);
+            EXPECT_EQ(vb->weight, 2.0f);
+          }
+  }
+}
+
+TEST(VoxelTable, AMovedFromTableIsEmptyAndUsable) {
+  VoxelTable a(4);
+  a.find_or_insert(VoxelKey::make(10, 5, 6, 7)).weight = 3;
+  VoxelTable b(std::move(a));
+  EXPECT_EQ(a.group_count(), 0u);
+  EXPECT_EQ(a.block_count(), 0u);
+  EXPECT_EQ(a.memory_bytes(), 0u);
+  a.find_or_insert(VoxelKey::make(10, 1, 2, 3)).weight = 1;  // carves a chunk of its own
+  EXPECT_EQ(a.live_count(), 1u);
+  ASSERT_NE(b.find(VoxelKey::make(10, 5, 6, 7)), nullptr);
+  EXPECT_EQ(b.find(VoxelKey::make(10, 5, 6, 7))->weight, 3.0f);
+  EXPECT_EQ(b.find(VoxelKey::make(10, 1, 2, 3)), nullptr);
+  VoxelTable c(4);
+  c = std::move(b);
+  EXPECT_EQ(b.live_count(), 0u);
+  EXPECT_EQ(c.live_count(), 1u);
 }
 
 TEST(VoxelTable, GrowsFindsAndCompacts) {

@@ -109,6 +109,30 @@ TEST(BytePlanes, PlaneBHoldsByteBOfEveryUnit) {
   EXPECT_EQ(u, units);
 }
 
+TEST(Tile, ABlockWithoutVoxelsSurvivesARoundTrip) {
+  // A group made but never written (one 4^3 block of the tile with an empty mask) is read back as
+  // a group, so that the brick's tile is the same whether or not it was spilled and reloaded; as
+  // with the 4^3 table, which made the block.
+  const auto dir = scratch_dir("tile_empty_block");
+  const auto voxels = sample_voxels();
+  VoxelTable a(3);
+  fill(a, voxels);
+  const VoxelKey near = voxels[3].first;  // level 9, in brick (2, 0, 2)
+  const VoxelKey empty = VoxelKey::make(near.level(), near.x() ^ 32, near.y(), near.z());
+  ASSERT_EQ(brick_of(empty, 3).x, 2u);
+  ASSERT_GE(empty.level() - 3, kTileBlockLog) << "a level whose groups are eight blocks";
+  ASSERT_EQ(a.group(empty, false), nullptr);
+  const std::size_t groups = a.group_count();
+  a.group(empty, true);
+  write_tile(dir / "a.tile", {2, 0, 2}, a);
+  VoxelTable back(3);
+  read_tile(dir / "a.tile", back);
+  EXPECT_EQ(back.group_count(), groups + 1);
+  EXPECT_EQ(back.live_count(), voxels.size());
+  write_tile(dir / "back.tile", {2, 0, 2}, back);
+  EXPECT_EQ(bytes_of(dir / "a.tile"), bytes_of(dir / "back.tile"));
+}
+
 TEST(Tile, RoundTripKeepsEveryVoxelAndIsIndependentOfInsertionOrder) {
   const auto dir = scratch_dir("tile_round_trip");
   const auto voxels = sample_voxels();
@@ -718,8 +742,8 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
     VoxelTable fresh(3);
     read_tile(dir / "more.tile", fresh);
   }, "more.tile", std::to_string(blocks) + " blocks, header says " + std::to_string(blocks + 1));
-  // A count no payload could hold: the reader sizes its index by what the payload can hold (a
-  // block takes at least its 8-byte key), not by the count, which would ask for ~90 GB.
+  // A count no payload could hold: the reader sizes its index by the bytes it has decompressed (a
+  // block takes at least 16), not by the count, which would ask for 128 GiB.
   write_bytes(dir / "lying.tile", chunked_tile(6, {2, 0, 2}, 3, 0xffffffffu, chunks));
   expect_input_error([&] {
     VoxelTable fresh(3);
