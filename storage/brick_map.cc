@@ -117,7 +117,7 @@ VoxelData* BrickMap::part(Brick& b, BlockGroup& group, int part, int log, unsign
   // in ~250): under it, the lock's cache line went back and forth between the cores once per
   // block, and so did the shared count, which now changes only when a chunk is added.
   std::int64_t grown = 0;
-  VoxelData* const v = b.voxels.make_part_shared(group, part, log, b.mutex, thread, &grown);
+  VoxelData* const v = b.voxels.make_part_shared(group, part, log, &b.mutex, thread, &grown);
   if (grown != 0) resident_bytes_ += grown;
   return v;
 }

@@ -497,7 +497,6 @@ class BlockDecoder {
     const bool by_part = table_log != log && stores_presence(version_);
     VoxelData* data = nullptr;
     BlockGroup* group = nullptr;
-    VoxelData* parts[8] = {};
     if (table_log == log) {
       data = out_.block(origin, true).data;
     } else {
@@ -509,19 +508,7 @@ class BlockDecoder {
     }
     for (std::uint64_t m = present; m != 0; m &= m - 1, p += record) {
       const int t = std::countr_zero(m);
-      VoxelData* slot;
-      if (!by_part) {
-        slot = data + t;
-      } else {
-        const int q = kTileToGroup[t], o = q >> 3;
-        if (!parts[o]) {
-          const std::uint32_t dx = std::uint32_t(o & 1) << table_log, dy = std::uint32_t(o >> 1 & 1) << table_log,
-                              dz = std::uint32_t(o >> 2) << table_log;
-          parts[o] = out_.make_part(*group, VoxelKey::make(level, origin.x() + dx, origin.y() + dy, origin.z() + dz));
-        }
-        slot = parts[o] + (q & 7);
-      }
-      VoxelData& v = *slot;
+      VoxelData& v = by_part ? out_.make_part(*group, kTileToGroup[t] >> 3, table_log)[kTileToGroup[t] & 7] : data[t];
       v.distance = get_float(p);
       v.weight = get_float(p + 4);
       if (!std::isfinite(v.distance) || !std::isfinite(v.weight))

@@ -124,22 +124,22 @@ VoxelData* VoxelTable::part_voxels(int log, bool alone, std::mutex* lock, unsign
   return static_cast<VoxelData*>(allocate(n * sizeof(VoxelData), alone, lock, grown, cursor));
 }
 
-VoxelData* VoxelTable::make_part(BlockGroup& group, VoxelKey key) {
-  std::atomic<VoxelData*>& part = group.part[group_part(key, brick_level_)];
+VoxelData* VoxelTable::make_part(BlockGroup& group, int part_index, int log) {
+  std::atomic<VoxelData*>& part = group.part[part_index];
   VoxelData* v = part.load(std::memory_order_relaxed);
   if (!v) {
-    v = part_voxels(block_log(key.level(), brick_level_), true, nullptr, 0, nullptr);
+    v = part_voxels(log, true, nullptr, 0, nullptr);
     part.store(v, std::memory_order_relaxed);
   }
   return v;
 }
 
-VoxelData* VoxelTable::make_part_shared(BlockGroup& group, int part_index, int log, std::mutex& lock, unsigned cursor,
+VoxelData* VoxelTable::make_part_shared(BlockGroup& group, int part_index, int log, std::mutex* lock, unsigned cursor,
                                         std::int64_t* grown) {
   std::atomic<VoxelData*>& part = group.part[part_index];
   VoxelData* made = part.load(std::memory_order_acquire);
   if (made) return made;
-  VoxelData* const fresh = part_voxels(log, false, &lock, cursor, grown);
+  VoxelData* const fresh = part_voxels(log, false, lock, cursor, grown);
   // Release: a thread that finds the pointer finds the block's zeroed voxels. If another thread
   // made the block first, `fresh` stays unused in the arena (zeroed bytes no group points to).
   return part.compare_exchange_strong(made, fresh, std::memory_order_acq_rel, std::memory_order_acquire) ? fresh : made;
@@ -150,14 +150,11 @@ BlockRef VoxelTable::block(VoxelKey key, bool create) {
   const int log = block_log(key.level(), brick_level_);
   BlockGroup* const g = group(key, create);
   if (!g) return {origin, log, nullptr};
-  std::atomic<VoxelData*>& part = g->part[group_part(key, brick_level_)];
-  VoxelData* v = part.load(std::memory_order_acquire);
-  if (!v && create) {
-    // The caller holds the lock that guards the index, but integration's threads may be making
-    // blocks of this table without it (make_part_shared): the same atomic steps as theirs.
-    VoxelData* const fresh = part_voxels(log, false, nullptr, 0, nullptr);
-    v = part.compare_exchange_strong(v, fresh, std::memory_order_acq_rel, std::memory_order_acquire) ? fresh : v;
-  }
+  const int part = group_part(key, brick_level_);
+  // The caller holds the lock that guards the index, but integration's threads may be making
+  // blocks of this table without it: the same steps as theirs.
+  VoxelData* const v = create ? make_part_shared(*g, part, log, nullptr, 0, nullptr)
+                              : g->part[part].load(std::memory_order_acquire);
   return {origin, log, v};
 }
 

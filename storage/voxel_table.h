@@ -302,14 +302,14 @@ class VoxelTable {
   void reserve(std::size_t groups);
   // The group of the tile block holding `key` (tile_block_log); null if absent and !create.
   BlockGroup* group(VoxelKey key, bool create);
-  // Block `group_part(key)` of `group` (this table's group of `key`), made if absent, by a caller
-  // that has the table to itself (reading a tile).
-  VoxelData* make_part(BlockGroup& group, VoxelKey key);
-  // Block `part` of `group`, of edge 2^log, made if absent while other threads may make blocks of
-  // the table's groups: `lock` guards the index (the caller does not hold it), each thread carves
-  // from the chunk of its `cursor` (any number: threads sharing one stay correct, they only
-  // contend), and *grown receives the bytes of any chunk added (memory_bytes' growth).
-  VoxelData* make_part_shared(BlockGroup& group, int part, int log, std::mutex& lock, unsigned cursor,
+  // Block `part` of `group`, of edge 2^log, made if absent, by a caller that has the table to
+  // itself (reading a tile).
+  VoxelData* make_part(BlockGroup& group, int part, int log);
+  // The same while other threads may make blocks of the table's groups: `lock` guards the index
+  // (null if the caller holds it), each thread carves from the chunk of its `cursor` (any number:
+  // threads sharing one stay correct, they only contend), and *grown (if given) receives the bytes
+  // of any chunk added (memory_bytes' growth).
+  VoxelData* make_part_shared(BlockGroup& group, int part, int log, std::mutex* lock, unsigned cursor,
                               std::int64_t* grown);
 
   // The voxel if present (live or erased), else null.

@@ -333,7 +333,7 @@ TEST(VoxelTable, BlocksMadeByTwoThreadsAtOnceAreOnePerPlace) {
       std::uint32_t more = 0;
       for (BlockGroup* g : groups) {
         for (int o = 0; o < 8; ++o) {
-          VoxelData* v = t.make_part_shared(*g, o, 1, lock, cursor, &grown[side]);
+          VoxelData* v = t.make_part_shared(*g, o, 1, &lock, cursor, &grown[side]);
           v[side].weight = float(side + 1);  // voxel 0 by one thread, voxel 1 by the other
           made[side].push_back(v);
         }
