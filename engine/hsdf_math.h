@@ -1,7 +1,9 @@
 #pragma once
 // The pure formulas of sections 5 and 6, kept apart so tests can check them by hand.
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 
 namespace sf {
 
@@ -20,10 +22,15 @@ inline int triangle_level_log2(double root_size, double lambda, double footprint
 // with ratio = m 2^e, m in [0.5, 1), log2(ratio) = e + log2(m). Unless m lies within 1e-5 of 0.5
 // or 1, log2(m) stays more than 1.4e-5 from -1 and from 0, far beyond log2's rounding and the
 // 1.5e-6 tolerance, so the ceiling is e; near a power of two the formula decides.
+// m and e are read off the bits (what frexp does, without its libm call: 2 % of a frame's
+// preparation); a ratio that is not a positive normal number goes to the formula.
 inline int triangle_level(double root_size, double lambda, double footprint, int max_level) {
   const double ratio = root_size * lambda / footprint;
-  int e = 0;
-  const double m = std::frexp(ratio, &e);
+  const std::uint64_t bits = std::bit_cast<std::uint64_t>(ratio);
+  const std::uint64_t biased = bits >> 52;  // with the sign bit: above 0x7ff if negative
+  if (biased - 1 >= 0x7fe) return triangle_level_log2(root_size, lambda, footprint, max_level);
+  const int e = int(biased) - 1022;
+  const double m = std::bit_cast<double>((bits & 0x000fffffffffffffULL) | (std::uint64_t{1022} << 52));
   if (!(m > 0.50001 && m < 0.99999)) return triangle_level_log2(root_size, lambda, footprint, max_level);
   if (e <= 0) return 0;
   return std::min(e, max_level);

@@ -356,34 +356,6 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     *qr0 = std::max(0, ty * kTile - 1), *qr1 = std::min(QH, (ty + 1) * kTile);
     *qc0 = std::max(0, tx * kTile - 1), *qc1 = std::min(QW, (tx + 1) * kTile);
   };
-  // Every triangle's levels, counted in the statistics whether or not this call evaluates it.
-  // Each element is written here, once: no zeroing pass over the whole table first (a frame of
-  // 500 x 375 has 45 MB of them, and this runs for every read of the frame).
-  p.tris.resize(triangles.size());
-  std::vector<GridTriangle>& tris = p.tris;
-  p.stats = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), IntegrateStats{},
-      [&](const tbb::blocked_range<std::size_t>& r, IntegrateStats c) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t) {
-          GridTriangle& g = tris[t];  // normal, P0 and own are set below where they are used
-          g.level = -1;
-          g.coarsest = 0;
-          g.ok = false;
-          for (int k = 0; k < 3; ++k) g.idx[k] = triangles[t][k];
-          int lt = 0, coarsest = 0;
-          if (!insertion_levels(frame, g.idx, root, options, &lt, &coarsest)) continue;
-          g.level = std::int8_t(lt);
-          g.coarsest = std::int8_t(coarsest);
-          ++c.triangles;
-          ++c.triangles_per_level[lt];
-        }
-        return c;
-      },
-      [](IntegrateStats a, const IntegrateStats& b) {
-        a.add(b);
-        return a;
-      });
-
   std::vector<char> tile_active(std::size_t(TX) * TY, 1);
   std::vector<char> quad_needed;
   if (region_box) {
@@ -397,9 +369,11 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
       for (int r = qr0; r < qr1; ++r)
         for (int c = qc0; c < qc1; ++c)
           for (std::int32_t t : p.quad[std::size_t(r) * QW + c].tri) {
-            if (t < 0 || tris[t].level < 0) continue;
-            reach = std::max(reach, insertion_ramp(options, root, tris[t].coarsest, tris[t].level));
-            for (std::uint32_t i : tris[t].idx) box.extend(frame.position[i].cast<double>());
+            if (t < 0) continue;
+            int lt = 0, coarsest = 0;
+            if (!insertion_levels(frame, triangles[t].data(), root, options, &lt, &coarsest)) continue;
+            reach = std::max(reach, insertion_ramp(options, root, coarsest, lt));
+            for (std::uint32_t i : triangles[t]) box.extend(frame.position[i].cast<double>());
           }
       const Vector3d pad = Vector3d::Constant(reach + 1e-6 * root.size);
       tile_active[tile] = !box.isEmpty() && Eigen::AlignedBox3d(box.min() - pad, box.max() + pad).intersects(*region_box);
@@ -413,26 +387,52 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     }
   }
 
+  // Every triangle's levels, counted in the statistics whether or not this call evaluates it,
+  // and the geometry of those this call can evaluate, in one pass over the quads (each triangle
+  // lies in exactly one): a table of 600 k triangles of 64 bytes (a 640 x 480 frame) is written
+  // once and read back once, by the tile pass below. Each element is written here, once: no
+  // zeroing pass over the whole table first. A triangle's ownership is its quad's shape: its
+  // three corners are distinct pixel centres, so its edges never degenerate.
+  p.tris.resize(triangles.size());
+  std::vector<GridTriangle>& tris = p.tris;
   const Vector3d centre = sensor.centre();
-  // The geometry of the triangles this call can evaluate. Their ownership is their quad's shape:
-  // its three corners are distinct pixel centres, so its edges never degenerate.
-  tbb::parallel_for(tbb::blocked_range<int>(0, QH, 16), [&](const tbb::blocked_range<int>& rows) {
-    for (int qi = rows.begin() * QW; qi != rows.end() * QW; ++qi) {
-      if (!quad_needed.empty() && !quad_needed[std::size_t(qi)]) continue;
-      Quad& qd = p.quad[std::size_t(qi)];
-      for (int slot = 0; slot < 2; ++slot) {
-        const std::int32_t t = qd.tri[slot];
-        if (t < 0 || tris[t].level < 0) continue;
-        GridTriangle& g = tris[t];
-        Vector3d P[3];
-        for (int k = 0; k < 3; ++k) P[k] = frame.position[g.idx[k]].cast<double>();
-        g.P0 = frame.position[g.idx[0]];
-        g.ok = facing_normal(sensor, centre, P, &g.normal);
-        if (g.ok) qd.shape[slot] |= Quad::kUsable;
-      }
-      qd.split = split_of(qd, p.shapes);
-    }
-  });
+  p.stats = tbb::parallel_reduce(
+      tbb::blocked_range<int>(0, QH, 16), IntegrateStats{},
+      [&](const tbb::blocked_range<int>& rows, IntegrateStats c) {
+        for (int qi = rows.begin() * QW; qi != rows.end() * QW; ++qi) {
+          const bool needed = quad_needed.empty() || quad_needed[std::size_t(qi)];
+          Quad& qd = p.quad[std::size_t(qi)];
+          for (int slot = 0; slot < 2; ++slot) {
+            const std::int32_t t = qd.tri[slot];
+            if (t < 0) continue;
+            GridTriangle& g = tris[t];
+            for (int k = 0; k < 3; ++k) g.idx[k] = triangles[t][k];
+            g.ok = false;
+            int lt = 0, coarsest = 0;
+            if (!insertion_levels(frame, g.idx, root, options, &lt, &coarsest)) {
+              g.level = -1;
+              g.coarsest = 0;
+              continue;
+            }
+            g.level = std::int8_t(lt);
+            g.coarsest = std::int8_t(coarsest);
+            ++c.triangles;
+            ++c.triangles_per_level[lt];
+            if (!needed) continue;  // normal and P0 are left unset: nothing reads them
+            Vector3d P[3];
+            for (int k = 0; k < 3; ++k) P[k] = frame.position[g.idx[k]].cast<double>();
+            g.P0 = frame.position[g.idx[0]];
+            g.ok = facing_normal(sensor, centre, P, &g.normal);
+            if (g.ok) qd.shape[slot] |= Quad::kUsable;
+          }
+          if (needed) qd.split = split_of(qd, p.shapes);
+        }
+        return c;
+      },
+      [](IntegrateStats a, const IntegrateStats& b) {
+        a.add(b);
+        return a;
+      });
 
   // Per tile and level: bounds of the prisms of the triangles inserted there.
   int lowest = L, highest = -1;  // levels of equation 1 inserted

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "engine/fusion.h"
@@ -43,6 +44,15 @@ TEST(Equation1, ExponentShortcutEqualsTheLog2Formula) {
     for (float f : {std::ldexp(1.0f, -k), std::nextafter(std::ldexp(1.0f, -k), 0.0f),
                     std::nextafter(std::ldexp(1.0f, -k), 1e30f)})
       EXPECT_EQ(triangle_level(1.0, 1.0, f, 18), triangle_level_log2(1.0, 1.0, f, 18)) << f;
+  // Ratios that are not positive normal numbers go to the formula: subnormal (a huge footprint),
+  // infinite (a subnormal one), zero, negative, NaN. Worked out: 0, 18, 0, 0, 0.
+  const double odd[] = {1e300, 1e-320, std::numeric_limits<double>::infinity(), -0.5,
+                        std::numeric_limits<double>::quiet_NaN()};
+  const int expected[] = {0, 18, 0, 0, 0};
+  for (int k = 0; k < 5; ++k) {
+    EXPECT_EQ(triangle_level(1e-10, 1.0, odd[k], 18), expected[k]) << odd[k];
+    EXPECT_EQ(triangle_level(1e-10, 1.0, odd[k], 18), triangle_level_log2(1e-10, 1.0, odd[k], 18)) << odd[k];
+  }
 }
 
 TEST(BrickLevel, AutoIsTheFinestLevelMinus8Clamped) {
