@@ -23,6 +23,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <memory>
 
 #include "engine/integrate.h"
 #include "engine/integrate_kernel.h"
@@ -40,13 +41,40 @@ constexpr int kTile = 4;
 
 // What the kernel reads of a triangle once it owns a voxel. Its ownership is not here: the quad
 // holds it as a shape (below). One cache line, so that the owner costs one load.
+// No member initializers: prepare writes every field it reads (ScratchArray).
 struct alignas(64) GridTriangle {
   Vector3d normal;     // unit, facing the sensor
   Eigen::Vector3f P0;  // the first vertex, as the frame stores it
   std::uint32_t idx[3];
-  std::int8_t level = -1;  // level of equation 1; -1: not inserted
-  std::int8_t coarsest = 0;
-  bool ok = false;         // non-degenerate (inserted with contributions)
+  std::int8_t level;  // level of equation 1; -1: not inserted
+  std::int8_t coarsest;
+  bool ok;  // non-degenerate (inserted with contributions)
+};
+
+// A per-frame table whose elements prepare writes before anything reads them, kept from depth map
+// to depth map: growing it leaves the new elements unset, where a std::vector would write each
+// one (a 640 x 480 depth map after a 160 x 120 one: 36 MB of triangle records set only to be set
+// again).
+template <typename T>
+class ScratchArray {
+ public:
+  void resize(std::size_t n) {
+    if (n > capacity_) {
+      data_.reset(new T[n]);  // default-initialized: no writes for these element types
+      capacity_ = n;
+    }
+    size_ = n;
+  }
+  T& operator[](std::size_t i) { return data_[i]; }
+  const T& operator[](std::size_t i) const { return data_[i]; }
+  const T* data() const { return data_.get(); }
+  std::size_t size() const { return size_; }
+  std::size_t capacity() const { return capacity_; }
+  bool empty() const { return size_ == 0; }
+
+ private:
+  std::unique_ptr<T[]> data_;
+  std::size_t size_ = 0, capacity_ = 0;
 };
 
 // A triangle of a pixel quad by its corners: vertex k at corner `(code >> 2k) & 3`, corners
@@ -203,7 +231,7 @@ struct Prepared {
   const DepthFrame* frame = nullptr;
   int QW = 0, QH = 0, TX = 0, TY = 0;
   std::vector<Quad> quad;
-  std::vector<GridTriangle> tris;
+  ScratchArray<GridTriangle> tris;
   QuadShapes shapes;
   // Per tile, the bounds at each level some triangle of the frame is inserted at: [level0,
   // level0 + levels), about 5 of the 19 a key allows (the table is written for every read of a
@@ -217,9 +245,9 @@ struct Prepared {
   std::vector<Vector3d> tile_normal;
   // Per sample (a vertex of up to six triangles, each in the bounds of up to four tiles): camera
   // depth and unit line of sight, computed once rather than per triangle and tile.
-  std::vector<double> depth;
-  std::vector<Vector3d> sight;
-  std::vector<std::uint32_t> colour;  // per sample, packed_colour; empty if the frame has none
+  ScratchArray<double> depth;
+  ScratchArray<Vector3d> sight;
+  ScratchArray<std::uint32_t> colour;  // per sample, packed_colour; empty if the frame has none
   double behind = 1;  // IntegrateOptions::behind
   double ramp[L][L];  // insertion_ramp by [level of the triangle][insertion level <= it]
   // What item_frustum needs of a tile's column (its u range) or row (v range), the same for every
@@ -394,7 +422,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   // zeroing pass over the whole table first. A triangle's ownership is its quad's shape: its
   // three corners are distinct pixel centres, so its edges never degenerate.
   p.tris.resize(triangles.size());
-  std::vector<GridTriangle>& tris = p.tris;
+  ScratchArray<GridTriangle>& tris = p.tris;
   const Vector3d centre = sensor.centre();
   p.stats = tbb::parallel_reduce(
       tbb::blocked_range<int>(0, QH, 16), IntegrateStats{},
@@ -1126,7 +1154,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   const Sensor& sensor = frame.sensor;
   const int QW = p.QW, TX = p.TX, TY = p.TY;
   const std::vector<Quad>& quad = p.quad;
-  const std::vector<GridTriangle>& tris = p.tris;
+  const ScratchArray<GridTriangle>& tris = p.tris;
   const QuadShapes& shapes = p.shapes;
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
