@@ -41,20 +41,21 @@ constexpr int kTile = 4;
 
 // What the kernel reads of a triangle once it owns a voxel. Its ownership is not here: the quad
 // holds it as a shape (below). One cache line, so that the owner costs one load.
-// No member initializers: prepare writes every field it reads (ScratchArray).
+// No member initializers (ScratchArray): prepare writes each field before anything reads it,
+// `normal` and `P0` only where `ok`.
 struct alignas(64) GridTriangle {
   Vector3d normal;     // unit, facing the sensor
   Eigen::Vector3f P0;  // the first vertex, as the frame stores it
   std::uint32_t idx[3];
   std::int8_t level;  // level of equation 1; -1: not inserted
   std::int8_t coarsest;
-  bool ok;  // non-degenerate (inserted with contributions)
+  bool ok;  // non-degenerate (inserted with contributions), in a quad this call evaluates
 };
 
 // A per-frame table whose elements prepare writes before anything reads them, kept from depth map
-// to depth map: growing it leaves the new elements unset, where a std::vector would write each
-// one (a 640 x 480 depth map after a 160 x 120 one: 36 MB of triangle records set only to be set
-// again).
+// to depth map. Unlike std::vector::resize, resize() keeps nothing: past the capacity it discards
+// the contents and leaves the new elements unset, where a std::vector would write each one (a
+// 640 x 480 depth map after a 160 x 120 one: 36 MB of triangle records set only to be set again).
 template <typename T>
 class ScratchArray {
  public:
@@ -417,10 +418,11 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
 
   // Every triangle's levels, counted in the statistics whether or not this call evaluates it,
   // and the geometry of those this call can evaluate, in one pass over the quads (each triangle
-  // lies in exactly one): a table of 600 k triangles of 64 bytes (a 640 x 480 frame) is written
-  // once and read back once, by the tile pass below. Each element is written here, once: no
-  // zeroing pass over the whole table first. A triangle's ownership is its quad's shape: its
-  // three corners are distinct pixel centres, so its edges never degenerate.
+  // lies in exactly one): the table of 64-byte triangle records (600 k for a 640 x 480 frame) is
+  // written by this pass alone, where a pass of its own over the triangles wrote it first. Each
+  // element is written here, once: no zeroing pass over the whole table first. A triangle's
+  // ownership is its quad's shape: its three corners are distinct pixel centres, so its edges
+  // never degenerate.
   p.tris.resize(triangles.size());
   ScratchArray<GridTriangle>& tris = p.tris;
   const Vector3d centre = sensor.centre();

@@ -44,14 +44,21 @@ TEST(Equation1, ExponentShortcutEqualsTheLog2Formula) {
     for (float f : {std::ldexp(1.0f, -k), std::nextafter(std::ldexp(1.0f, -k), 0.0f),
                     std::nextafter(std::ldexp(1.0f, -k), 1e30f)})
       EXPECT_EQ(triangle_level(1.0, 1.0, f, 18), triangle_level_log2(1.0, 1.0, f, 18)) << f;
-  // Ratios that are not positive normal numbers go to the formula: subnormal (a huge footprint),
-  // infinite (a subnormal one), zero, negative, NaN. Worked out: 0, 18, 0, 0, 0.
-  const double odd[] = {1e300, 1e-320, std::numeric_limits<double>::infinity(), -0.5,
-                        std::numeric_limits<double>::quiet_NaN()};
-  const int expected[] = {0, 18, 0, 0, 0};
-  for (int k = 0; k < 5; ++k) {
-    EXPECT_EQ(triangle_level(1e-10, 1.0, odd[k], 18), expected[k]) << odd[k];
-    EXPECT_EQ(triangle_level(1e-10, 1.0, odd[k], 18), triangle_level_log2(1e-10, 1.0, odd[k], 18)) << odd[k];
+  // Ratios that are not positive normal numbers go to the formula (root 1e-10): subnormal (a huge
+  // footprint), infinite (a subnormal one), zero, negative (-1e10: read off its bits without the
+  // sign it would give level 18), NaN.
+  const struct {
+    double footprint;
+    int level;
+  } odd[] = {{1e300, 0},
+             {1e-320, 18},
+             {std::numeric_limits<double>::infinity(), 0},
+             {-1e-20, 0},
+             {-0.5, 0},
+             {std::numeric_limits<double>::quiet_NaN(), 0}};
+  for (const auto& [footprint, level] : odd) {
+    EXPECT_EQ(triangle_level(1e-10, 1.0, footprint, 18), level) << footprint;
+    EXPECT_EQ(triangle_level(1e-10, 1.0, footprint, 18), triangle_level_log2(1e-10, 1.0, footprint, 18)) << footprint;
   }
 }
 

@@ -479,6 +479,72 @@ TEST(Integrate, VoxelCentricEnumerationEqualsPrisms) {
   }
 }
 
+// One scratch serves depth maps of different sizes, with and without a region, one after another
+// (its per-frame tables keep their capacity and are not cleared between them): each field must be
+// the one a fresh scratch gives.
+TEST(Integrate, AScratchReusedAcrossDepthMapsGivesFreshFields) {
+  auto wavy = [](int width, int height, double tilt) {
+    DepthFrame f;
+    f.name = "wavy";
+    f.width = width;
+    f.height = height;
+    f.sensor.fx = f.sensor.fy = 30;
+    f.sensor.cx = width / 2.0;
+    f.sensor.cy = height / 2.0;
+    const Eigen::Vector3d z = Eigen::Vector3d(0.2, tilt, 1).normalized(), x = Eigen::Vector3d::UnitY().cross(z).normalized();
+    f.sensor.R.row(0) = x;
+    f.sensor.R.row(1) = z.cross(x);
+    f.sensor.R.row(2) = z;
+    f.sensor.t = -f.sensor.R * Eigen::Vector3d(0.3, -0.2, 0.1);
+    std::vector<float> depth(f.size());
+    for (int r = 0; r < height; ++r)
+      for (int c = 0; c < width; ++c) depth[r * width + c] = float(1.3 + 0.02 * c + 0.04 * std::sin(0.6 * r));
+    fill_perspective_samples(f, depth, false);
+    f.colour.resize(f.size());
+    for (std::size_t i = 0; i < f.size(); ++i)
+      f.colour[i] = {std::uint8_t(i % 256), std::uint8_t((5 * i) % 256), std::uint8_t((11 * i) % 256)};
+    return f;
+  };
+  const RootCube root{Eigen::Vector3d(-1, -1, 0), 3.3};
+  IntegrateOptions opt;
+  opt.coarser_levels = 3;
+  const BrickBox half{{0, 0, 0}, {4, 8, 8}};  // bricks of level 3 with x below the root's middle
+  struct Step {
+    DepthFrame frame;
+    const BrickBox* region;
+  };
+  const Step steps[] = {{wavy(41, 31, 0.1), nullptr}, {wavy(17, 13, -0.2), &half}, {wavy(41, 31, 0.3), &half},
+                        {wavy(23, 19, 0.0), nullptr}};
+  IntegrateScratch scratch;
+  for (const Step& step : steps) {
+    SCOPED_TRACE(std::to_string(step.frame.width) + " x " + std::to_string(step.frame.height) +
+                 (step.region ? " in half the bricks" : " whole"));
+    const auto tris = triangulate(step.frame, {});
+    BrickMap reused(3), fresh(3), whole(3);
+    IntegrateStats a, b, c;
+    ASSERT_TRUE(integrate_frame_projective(step.frame, tris, root, opt, reused, &a, step.region, &scratch));
+    ASSERT_TRUE(integrate_frame_projective(step.frame, tris, root, opt, fresh, &b, step.region));
+    ASSERT_TRUE(integrate_frame_projective(step.frame, tris, root, opt, whole, &c));
+    EXPECT_EQ(a.contributions, b.contributions);
+    ASSERT_GT(b.contributions, 500u);
+    if (step.region) {
+      EXPECT_LT(b.contributions, c.contributions);  // the region leaves some out
+    }
+    ASSERT_EQ(reused.voxel_count(), fresh.voxel_count());
+    std::size_t compared = 0;
+    for (Brick* br : fresh.bricks())
+      br->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+        const VoxelData* w = reused.find(k);
+        ASSERT_NE(w, nullptr) << "level " << k.level() << " voxel " << k.x() << "," << k.y() << "," << k.z();
+        EXPECT_EQ(v.distance, w->distance);
+        EXPECT_EQ(v.weight, w->weight);
+        for (int ch = 0; ch < 3; ++ch) EXPECT_EQ(v.colour_fixed[ch], w->colour_fixed[ch]);
+        ++compared;
+      });
+    EXPECT_EQ(compared, fresh.voxel_count());
+  }
+}
+
 // Frames the voxel-centric path cannot index fall back to prisms and are still integrated.
 TEST(Integrate, OrthographicFramesUseThePrismPath) {
   DepthFrame f = plane_frame(2.0, 6);
