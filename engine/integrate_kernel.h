@@ -201,6 +201,15 @@ inline void interpolate_colour_scalar(const double bary[3], const std::uint32_t 
 }
 
 #if defined(__SSE2__) && defined(__x86_64__)
+// colour_byte per lane, as 32-bit integers in lanes 0 and 1: max/min clamp (a NaN or -0 becomes
+// 0, as !(v > 0) does), truncate, and add one where the fraction is at least 0.5.
+inline __m128i colour_bytes_lanes(__m128d v) {
+  v = _mm_min_pd(_mm_max_pd(v, _mm_setzero_pd()), _mm_set1_pd(255.0));
+  const __m128i i = _mm_cvttpd_epi32(v);
+  const __m128d up = _mm_cmpge_pd(_mm_sub_pd(v, _mm_cvtepi32_pd(i)), _mm_set1_pd(0.5));
+  return _mm_sub_epi32(i, _mm_shuffle_epi32(_mm_castpd_si128(up), _MM_SHUFFLE(3, 3, 2, 0)));
+}
+
 // Channels 0 and 1 in one register, 2 in another: the same products and sums, lane by lane, as
 // interpolate_colour_scalar (so the same bits), without the scalar code's six branches per
 // contribution (the run's branches 0.878x, bench/README.md session 32).
@@ -214,22 +223,47 @@ inline void interpolate_colour(const double bary[3], const std::uint32_t c[3], s
     lo = j == 0 ? plo : _mm_add_pd(lo, plo);
     hi = j == 0 ? phi : _mm_add_pd(hi, phi);
   }
-  // colour_byte per lane: max/min clamp (a NaN or -0 becomes 0, as !(v > 0) does), truncate, and
-  // add one where the fraction is at least 0.5.
-  auto bytes_of = [](__m128d v) {
-    v = _mm_min_pd(_mm_max_pd(v, _mm_setzero_pd()), _mm_set1_pd(255.0));
-    const __m128i i = _mm_cvttpd_epi32(v);
-    const __m128d up = _mm_cmpge_pd(_mm_sub_pd(v, _mm_cvtepi32_pd(i)), _mm_set1_pd(0.5));
-    return _mm_sub_epi32(i, _mm_shuffle_epi32(_mm_castpd_si128(up), _MM_SHUFFLE(3, 3, 2, 0)));
-  };
-  const __m128i a = bytes_of(lo), b = bytes_of(hi);
+  const __m128i a = colour_bytes_lanes(lo), b = colour_bytes_lanes(hi);
   out[0] = std::uint8_t(_mm_cvtsi128_si32(a));
   out[1] = std::uint8_t(_mm_cvtsi128_si32(_mm_srli_si128(a, 4)));
   out[2] = std::uint8_t(_mm_cvtsi128_si32(b));
 }
+
+// interpolate_colour for two contributions at once (the sample phase's two lanes), their six
+// channels in three registers rather than four: (first 0, first 1), (first 2, second 0),
+// (second 1, second 2), each lane with interpolate_colour_scalar's products and sums in its order.
+inline void interpolate_colour_pair(const double bary0[3], const double bary1[3], const std::uint32_t c0[3],
+                                    const std::uint32_t c1[3], std::uint8_t out0[3], std::uint8_t out1[3]) {
+  const __m128i zero = _mm_setzero_si128();
+  __m128d a = _mm_setzero_pd(), b = _mm_setzero_pd(), c = _mm_setzero_pd();
+  for (int j = 0; j < 3; ++j) {
+    // Six bytes: the first's channels 0-2, the second's 0-2 (packed_colour leaves byte 3 zero).
+    const std::uint64_t both = std::uint64_t(c0[j]) | (std::uint64_t(c1[j]) << 24);
+    const __m128i u16 = _mm_unpacklo_epi8(_mm_cvtsi64_si128(std::int64_t(both)), zero);
+    const __m128i first = _mm_unpacklo_epi16(u16, zero), second = _mm_unpackhi_epi16(u16, zero);
+    const __m128d pa = _mm_mul_pd(_mm_set1_pd(bary0[j]), _mm_cvtepi32_pd(first));
+    const __m128d pb = _mm_mul_pd(_mm_set_pd(bary1[j], bary0[j]), _mm_cvtepi32_pd(_mm_srli_si128(first, 8)));
+    const __m128d pc = _mm_mul_pd(_mm_set1_pd(bary1[j]), _mm_cvtepi32_pd(second));
+    a = j == 0 ? pa : _mm_add_pd(a, pa);
+    b = j == 0 ? pb : _mm_add_pd(b, pb);
+    c = j == 0 ? pc : _mm_add_pd(c, pc);
+  }
+  const __m128i ia = colour_bytes_lanes(a), ib = colour_bytes_lanes(b), ic = colour_bytes_lanes(c);
+  out0[0] = std::uint8_t(_mm_cvtsi128_si32(ia));
+  out0[1] = std::uint8_t(_mm_cvtsi128_si32(_mm_srli_si128(ia, 4)));
+  out0[2] = std::uint8_t(_mm_cvtsi128_si32(ib));
+  out1[0] = std::uint8_t(_mm_cvtsi128_si32(_mm_srli_si128(ib, 4)));
+  out1[1] = std::uint8_t(_mm_cvtsi128_si32(ic));
+  out1[2] = std::uint8_t(_mm_cvtsi128_si32(_mm_srli_si128(ic, 4)));
+}
 #else
 inline void interpolate_colour(const double bary[3], const std::uint32_t c[3], std::uint8_t out[3]) {
   interpolate_colour_scalar(bary, c, out);
+}
+inline void interpolate_colour_pair(const double bary0[3], const double bary1[3], const std::uint32_t c0[3],
+                                    const std::uint32_t c1[3], std::uint8_t out0[3], std::uint8_t out1[3]) {
+  interpolate_colour_scalar(bary0, c0, out0);
+  interpolate_colour_scalar(bary1, c1, out1);
 }
 #endif
 

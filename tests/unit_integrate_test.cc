@@ -309,6 +309,16 @@ TEST(IntegrateKernel, ColourInLanesEqualsTheScalarReference) {
     integrate_detail::interpolate_colour_scalar(bary, cp, scalar);
     for (int k = 0; k < 3; ++k)
       ASSERT_EQ(int(lanes[k]), int(scalar[k])) << bary[0] << " " << bary[1] << " " << bary[2] << " channel " << k;
+    // Two at once, the second with the coordinates and colours rotated: each as the reference.
+    const double bary2[3] = {bary[2], bary[0], bary[1]};
+    const std::uint32_t cp2[3] = {cp[1], cp[2], cp[0]};
+    std::uint8_t pair[2][3], scalar2[3];
+    integrate_detail::interpolate_colour_pair(bary, bary2, cp, cp2, pair[0], pair[1]);
+    integrate_detail::interpolate_colour_scalar(bary2, cp2, scalar2);
+    for (int k = 0; k < 3; ++k) {
+      ASSERT_EQ(int(pair[0][k]), int(scalar[k])) << bary[0] << " " << bary[1] << " " << bary[2] << " channel " << k;
+      ASSERT_EQ(int(pair[1][k]), int(scalar2[k])) << bary2[0] << " " << bary2[1] << " " << bary2[2] << " channel " << k;
+    }
   };
   for (int i = 0; i < 200000; ++i) {
     const double bary[3] = {b(rng), b(rng), b(rng)};
