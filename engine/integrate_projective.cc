@@ -21,7 +21,6 @@
 #include <atomic>
 #include <bit>
 #include <cmath>
-#include <cstring>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -1102,21 +1101,11 @@ std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, 
     alignas(16) float df[4], wf[4];
     _mm_store_ps(df, distance_f);
     _mm_store_ps(wf, weight_f);
-    // The colours of both lanes at once (sample_colour's, the same bits).
-    std::uint8_t colour[2][3] = {{0, 0, 0}, {0, 0, 0}};
-    if (packed) {
-      const std::uint32_t* i0 = g[0]->idx;
-      const std::uint32_t* i1 = g[1]->idx;
-      const std::uint32_t c0[3] = {packed[i0[0]], packed[i0[1]], packed[i0[2]]};
-      const std::uint32_t c1[3] = {packed[i1[0]], packed[i1[1]], packed[i1[2]]};
-      interpolate_colour_pair(bary[0], bary[1], c0, c1, colour[0], colour[1]);
-    }
+    sample_colour_pair(g[0]->idx, g[1]->idx, bary[0], bary[1], packed, &c[0]->sample, &c[1]->sample);
     for (int l = 0; l < 2; ++l) {
       VoxelSample& s = c[l]->sample;
       s.distance = df[l];
       s.weight = wf[l];
-      s.has_colour = packed != nullptr;
-      std::memcpy(s.colour, colour[l], 3);
       batch.sampled[sampled] = k[l];
       sampled += std::size_t(accept >> l & 1);
     }
