@@ -160,13 +160,6 @@ class BlockCache {
       e.group = map_.group(*brick_, key);  // may throw (a damaged tile): the entry is set after
       e.brick = brick_;
       e.origin = origin;
-      // A group fetched here was last written by another depth map, long out of the caches: ask
-      // for all its blocks' lines at once rather than one miss after another as a column reaches
-      // them.
-      const std::size_t size = sizeof(VoxelData) << (3 * block_log(key.level(), map_.brick_level()));
-      for (const std::atomic<VoxelData*>& part : e.group->part)
-        if (const char* bytes = reinterpret_cast<const char*>(part.load(std::memory_order_relaxed)))
-          for (std::size_t off = 0; off < size; off += 64) __builtin_prefetch(bytes + off, 1);
     }
     *brick = e.brick;
     return e.group;
