@@ -165,17 +165,22 @@ inline void accumulate4(VoxelData* const v[4], const float distance[4], const fl
   const __m128 before = _mm_and_ps(has, _mm_or_ps(_mm_and_ps(full, r1), _mm_andnot_ps(full, scaled)));
   const __m128 Wc = _mm_add_ps(before, w);
   const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), Wc);
-  // blend_colour per channel: (before mean + weight c) inv, then colour_to_fixed_lanes.
-  alignas(16) std::int32_t c[3][4];
-  for (int lane = 0; lane < 4; ++lane)
-    for (int k = 0; k < 3; ++k) c[k][lane] = colour[lane][k];
+  // blend_colour per channel: (before mean + weight c) inv, then colour_to_fixed_lanes. The lanes'
+  // colours go into a register as one word each and are split there, rather than written to an
+  // array byte by byte and read back as vectors (a read cannot take its bytes from several
+  // pending writes, so it waited for them to reach the cache; igea 0.98-1.00).
+  const auto word = [](const std::uint8_t* c) { return int(c[0]) | (int(c[1]) << 8) | (int(c[2]) << 16); };
+  const __m128i words = _mm_set_epi32(word(colour[3]), word(colour[2]), word(colour[1]), word(colour[0]));
+  const __m128i byte = _mm_set1_epi32(255);
+  const __m128i c[3] = {_mm_and_si128(words, byte), _mm_and_si128(_mm_srli_epi32(words, 8), byte),
+                        _mm_srli_epi32(words, 16)};
   const __m128i fixed_in[3] = {_mm_and_si128(_mm_castps_si128(r2), low16), _mm_srli_epi32(_mm_castps_si128(r2), 16),
                                _mm_and_si128(_mm_castps_si128(r3), low16)};
   __m128i fixed[3];
   for (int k = 0; k < 3; ++k) {
     const __m128 mean = _mm_mul_ps(_mm_cvtepi32_ps(fixed_in[k]), _mm_set1_ps(1.0f / VoxelData::kColourUnit));
     const __m128 blended = _mm_mul_ps(
-        _mm_add_ps(_mm_mul_ps(before, mean), _mm_mul_ps(w, _mm_cvtepi32_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(c[k]))))),
+        _mm_add_ps(_mm_mul_ps(before, mean), _mm_mul_ps(w, _mm_cvtepi32_ps(c[k]))),
         inv);
     fixed[k] = colour_to_fixed_lanes(blended);
   }
