@@ -419,9 +419,12 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
     total = kHeaderBytes + chunks.stored_bytes();
     if (durable && ::fsync(fd) != 0) throw_write_error(tmp.string(), "cannot sync tile", errno);
 #if defined(__linux__)
-    // Not durable yet, but on its way: the caller's sync (one syncfs for many tiles) then waits for
-    // the disk only on the last tiles' bytes, not all of them, as the device writes while the next
-    // tiles are packed and compressed. A hint; its failure leaves the sync to do all the work.
+    // Not durable yet, but on its way: a checkpoint's sync (one syncfs for many tiles) then waits
+    // for the disk only on the last tiles' bytes, as the device writes while the next tiles are
+    // packed and compressed. A spilled tile's writeback starts now too, rather than at the next
+    // checkpoint; one replaced before then costs a disk write it might have been spared. The
+    // submission runs on this thread (where syncfs left it to a flusher). A hint: its failure
+    // leaves the sync to do all the work, and write errors still surface there.
     if (!durable) ::sync_file_range(fd, 0, 0, SYNC_FILE_RANGE_WRITE);
 #endif
   } catch (...) {

@@ -166,8 +166,8 @@ inline void accumulate4(VoxelData* const v[4], const float distance[4], const fl
   const __m128 Wc = _mm_add_ps(before, w);
   const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), Wc);
   // blend_colour per channel: (before mean + weight c) inv, then colour_to_fixed_lanes. The lanes'
-  // colours go into a register as one word each and are split there, rather than written to an
-  // array byte by byte and read back as vectors (a read cannot take its bytes from several
+  // colours go into a register as one word each and are split there, rather than stored to an
+  // int32 array lane by lane and read back as vectors (a read cannot take its bytes from several
   // pending writes, so it waited for them to reach the cache; igea 0.98-1.00).
   const auto word = [](const std::uint8_t* c) { return int(c[0]) | (int(c[1]) << 8) | (int(c[2]) << 16); };
   const __m128i words = _mm_set_epi32(word(colour[3]), word(colour[2]), word(colour[1]), word(colour[0]));
