@@ -61,6 +61,7 @@ bool run_round(const std::filesystem::path& dir, unsigned long n, const std::vec
       const ssize_t w = ::write(fd, data.data() + done, data.size() - done);
       if (w < 0 && errno == EINTR) continue;
       if (w <= 0) {
+        if (w == 0) errno = EIO;  // no progress: not an error the call reported
         fail(tmp);
         ::close(fd);
         return false;
@@ -111,8 +112,8 @@ int main(int argc, char** argv) {
   for (std::size_t i = 0; i < data.size(); ++i) data[i] = char(i * 2654435761u >> 13);  // not all zeros
   bool ok = true;
   for (unsigned long r = 0; r < rounds && ok; ++r)
-    for (const bool first : {false, true})
-      if (ok) ok = run_round(dir, n, data, first != (r % 2 == 1));
+    for (const bool second : {false, true})  // odd rounds start with the writeback started
+      if (ok) ok = run_round(dir, n, data, second != (r % 2 == 1));
   std::filesystem::remove_all(dir, ec);
   return ok ? 0 : 1;
 }

@@ -19,14 +19,14 @@ inline int triangle_level_log2(double root_size, double lambda, double footprint
   return int(std::min<double>(l, max_level));
 }
 
+static_assert(std::numeric_limits<double>::is_iec559, "triangle_level reads binary64 bits");
+
 // The same level without a log2 per triangle (run for every triangle of every read of a frame):
 // with ratio = m 2^e, m in [0.5, 1), log2(ratio) = e + log2(m). Unless m lies within 1e-5 of 0.5
 // or 1, log2(m) stays more than 1.4e-5 from -1 and from 0, far beyond log2's rounding and the
-// 1.5e-6 tolerance, so the ceiling is e; near a power of two the formula decides.
-static_assert(std::numeric_limits<double>::is_iec559, "triangle_level reads binary64 bits");
-
-// m and e are read off the bits (what frexp does, without its libm call: 2 % of a frame's
-// preparation); a ratio that is not a positive normal number goes to the formula.
+// 1.5e-6 tolerance, so the ceiling is e; near a power of two the formula decides. m and e are read
+// off the bits (what frexp does, without its libm call: 2 % of a frame's preparation); a ratio
+// that is not a positive normal number goes to the formula.
 inline int triangle_level(double root_size, double lambda, double footprint, int max_level) {
   const double ratio = root_size * lambda / footprint;
   const std::uint64_t bits = std::bit_cast<std::uint64_t>(ratio);

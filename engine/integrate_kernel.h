@@ -294,16 +294,13 @@ inline void sample_colour(const DepthFrame& frame, const std::uint32_t idx[3], c
 inline void sample_colour_pair(const std::uint32_t idx0[3], const std::uint32_t idx1[3], const double bary0[3],
                                const double bary1[3], const std::uint32_t* packed, VoxelSample* s0,
                                VoxelSample* s1) {
-  std::uint8_t colour[2][3] = {{0, 0, 0}, {0, 0, 0}};
+  s0->has_colour = s1->has_colour = packed != nullptr;
   if (packed) {
     const std::uint32_t c0[3] = {packed[idx0[0]], packed[idx0[1]], packed[idx0[2]]};
     const std::uint32_t c1[3] = {packed[idx1[0]], packed[idx1[1]], packed[idx1[2]]};
-    interpolate_colour_pair(bary0, bary1, c0, c1, colour[0], colour[1]);
-  }
-  VoxelSample* const s[2] = {s0, s1};
-  for (int l = 0; l < 2; ++l) {
-    s[l]->has_colour = packed != nullptr;
-    for (int k = 0; k < 3; ++k) s[l]->colour[k] = colour[l][k];
+    interpolate_colour_pair(bary0, bary1, c0, c1, s0->colour, s1->colour);  // s0 == s1: the same bytes twice
+  } else {
+    for (int k = 0; k < 3; ++k) s0->colour[k] = s1->colour[k] = 0;
   }
 }
 // `packed`, if given, holds the frame's colours as packed_colour words.

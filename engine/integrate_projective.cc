@@ -61,7 +61,7 @@ class ScratchArray {
  public:
   void resize(std::size_t n) {
     if (n > capacity_) {
-      data_.reset(new T[n]);  // default-initialized: no writes for these element types
+      data_ = std::make_unique_for_overwrite<T[]>(n);
       capacity_ = n;
     }
     size_ = n;
@@ -378,11 +378,15 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
     *qr0 = std::max(0, ty * kTile - 1), *qr1 = std::min(QH, (ty + 1) * kTile);
     *qc0 = std::max(0, tx * kTile - 1), *qc1 = std::min(QW, (tx + 1) * kTile);
   };
+  for (int lt = 0; lt < L; ++lt)
+    for (int l = 0; l <= lt; ++l) p.ramp[lt][l] = insertion_ramp(options, root, l, lt);
   std::vector<char> tile_active(std::size_t(TX) * TY, 1);
   std::vector<char> quad_needed;
   if (region_box) {
     // A voxel gets a contribution only within a ramp of its triangle: a tile whose vertices' box,
-    // widened by its triangles' longest ramp, misses the region writes nothing there.
+    // widened by its triangles' longest ramp, misses the region writes nothing there. The levels
+    // are worked out here, only on the region (sweep) path, and again in the pass below, which
+    // needs quad_needed first and writes each triangle's record once.
     tbb::parallel_for(0, TX * TY, [&](int tile) {
       int qr0, qr1, qc0, qc1;
       tile_quads(tile, &qr0, &qr1, &qc0, &qc1);
@@ -394,7 +398,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
             if (t < 0) continue;
             int lt = 0, coarsest = 0;
             if (!insertion_levels(frame, triangles[t].data(), root, options, &lt, &coarsest)) continue;
-            reach = std::max(reach, insertion_ramp(options, root, coarsest, lt));
+            reach = std::max(reach, p.ramp[lt][coarsest]);
             for (std::uint32_t i : triangles[t]) box.extend(frame.position[i].cast<double>());
           }
       const Vector3d pad = Vector3d::Constant(reach + 1e-6 * root.size);
@@ -489,8 +493,6 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
         if (!p.colour.empty()) p.colour[i] = packed_colour(frame.colour[i]);
       }
   });
-  for (int lt = 0; lt < L; ++lt)
-    for (int l = 0; l <= lt; ++l) p.ramp[lt][l] = insertion_ramp(options, root, l, lt);
   tbb::parallel_for(0, TX * TY, [&](int tile) {
     if (!tile_active[tile]) return;
     int qr0, qr1, qc0, qc1;
@@ -1286,10 +1288,10 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
             camera_terms(R, base, bx, terms);
             camera_terms(R, base, cx, terms);
-            // Room for every voxel of the column and one more (project_column_pairs).
-            if (i1 >= i0 && n + std::size_t(i1 - i0 + 2) > batch.capacity) batch.grow(n + std::size_t(i1 - i0 + 2), n);
-            // Phase 1: project; mark the voxels whose quad is this tile's.
             if (i1 < i0) continue;
+            // Room for every voxel of the column and one more (project_column_pairs).
+            if (n + std::size_t(i1 - i0 + 2) > batch.capacity) batch.grow(n + std::size_t(i1 - i0 + 2), n);
+            // Phase 1: project; mark the voxels whose quad is this tile's.
             n = project(terms, base, i0, i1, ib, ic, batch, n);
           }
         }
