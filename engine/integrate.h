@@ -63,6 +63,9 @@ class IntegrateScratch {
   std::size_t bytes() const;  // the tables' capacity
   struct Tables;
   std::unique_ptr<Tables> tables;
+  // The sample phase in four AVX2 lanes rather than two SSE2 ones (the same field either way);
+  // true where the CPU has AVX2. Tests clear it to check the two-lane path.
+  bool wide_lanes;
 };
 
 // Integrates one depth map into `map`. Runs parallel (tbb::parallel_for) in the calling arena.

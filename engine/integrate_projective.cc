@@ -11,6 +11,9 @@
 // evaluated once per level and depth map; ownership gives it at most one contribution, so tiles
 // write their voxels concurrently without locks (groups of blocks are created under their brick's
 // lock, blocks by a compare-and-swap in their group: storage/voxel_table.h).
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -1109,9 +1112,123 @@ std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, 
 }
 #endif
 
+#if defined(__x86_64__) && defined(__GNUC__)
+// Rows (x, y, z, anything) of four records to lanes x, y, z.
+__attribute__((target("avx2"))) inline void transpose3(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d* x,
+                                                       __m256d* y, __m256d* z) {
+  const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
+  const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
+  *x = _mm256_permute2f128_pd(t0, t2, 0x20);
+  *y = _mm256_permute2f128_pd(t1, t3, 0x20);
+  *z = _mm256_permute2f128_pd(t0, t2, 0x31);
+}
+
+// sample_candidates_pairs four candidates at a time, in AVX2's four double lanes where the CPU has
+// them (integrate_frame_projective asks): the same operations in the same order, so the same bits
+// (AVX2 without FMA: no multiply and add is fused). The candidates' centres and the owners'
+// normals and first vertices are read a whole record row at a time and transposed into lanes,
+// rather than put together lane by lane.
+__attribute__((target("avx2"))) std::size_t sample_candidates_quads(const Prepared& p, const DepthFrame& frame,
+                                                                     int level, const Vector3d& centre,
+                                                                     const IntegrateOptions& options,
+                                                                     const std::uint32_t* packed, ItemBatch& batch,
+                                                                     std::size_t owned) {
+  const bool has_confidence = !frame.confidence.empty();
+  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0), behind = _mm256_set1_pd(options.behind),
+                min_cosine = _mm256_set1_pd(options.min_cosine), sign = _mm256_set1_pd(-0.0);
+  const __m256d cx = _mm256_set1_pd(centre.x()), cy = _mm256_set1_pd(centre.y()), cz = _mm256_set1_pd(centre.z());
+  std::size_t sampled = 0;
+  for (std::size_t j = 0; j < owned; j += 4) {
+    const int lanes = int(std::min<std::size_t>(4, owned - j));
+    std::uint32_t k[4];
+    const Candidate* c[4];
+    const GridTriangle* g[4];
+    alignas(32) double ramp_of[4];
+    int level_ok = 0;
+    for (int l = 0; l < 4; ++l) {
+      k[l] = batch.owned[j + std::size_t(std::min(l, lanes - 1))];  // past the end: the last again
+      c[l] = &batch.cand[k[l]];
+      g[l] = &p.tris[c[l]->owner];
+      const bool ok = !(level < g[l]->coarsest || level > g[l]->level);
+      level_ok |= int(ok && l < lanes) << l;
+      ramp_of[l] = ok ? p.ramp[g[l]->level][level] : 1.0;
+    }
+    __m256d X, Y, Z, nx, ny, nz;
+    transpose3(_mm256_loadu_pd(c[0]->X.data()), _mm256_loadu_pd(c[1]->X.data()), _mm256_loadu_pd(c[2]->X.data()),
+               _mm256_loadu_pd(c[3]->X.data()), &X, &Y, &Z);
+    transpose3(_mm256_loadu_pd(g[0]->normal.data()), _mm256_loadu_pd(g[1]->normal.data()),
+               _mm256_loadu_pd(g[2]->normal.data()), _mm256_loadu_pd(g[3]->normal.data()), &nx, &ny, &nz);
+    __m128 q0 = _mm_loadu_ps(g[0]->P0.data()), q1 = _mm_loadu_ps(g[1]->P0.data()), q2 = _mm_loadu_ps(g[2]->P0.data()),
+           q3 = _mm_loadu_ps(g[3]->P0.data());
+    _MM_TRANSPOSE4_PS(q0, q1, q2, q3);  // q0, q1, q2: the first vertices' x, y, z
+    const __m256d ramp = _mm256_load_pd(ramp_of);
+    // plane = normal . (P0 - X), P0 widened from float (exact).
+    const __m256d px = _mm256_sub_pd(_mm256_cvtps_pd(q0), X), py = _mm256_sub_pd(_mm256_cvtps_pd(q1), Y),
+                  pz = _mm256_sub_pd(_mm256_cvtps_pd(q2), Z);
+    const __m256d plane =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, px), _mm256_mul_pd(ny, py)), _mm256_mul_pd(nz, pz));
+    const __m256d in_front = _mm256_cmp_pd(plane, zero, _CMP_GT_OQ);
+    const __m256d beyond =
+        _mm256_or_pd(_mm256_and_pd(in_front, _mm256_cmp_pd(plane, _mm256_mul_pd(ramp, behind), _CMP_GT_OQ)),
+                     _mm256_andnot_pd(in_front, _mm256_cmp_pd(_mm256_xor_pd(plane, sign), ramp, _CMP_GT_OQ)));
+    const __m256d dx = _mm256_sub_pd(X, cx), dy = _mm256_sub_pd(Y, cy), dz = _mm256_sub_pd(Z, cz);
+    const __m256d squared =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
+    const __m256d dot = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, dx), _mm256_mul_pd(ny, dy)), _mm256_mul_pd(nz, dz));
+    const __m256d cosine = _mm256_div_pd(dot, _mm256_sqrt_pd(squared));
+    const __m256d minus_cosine = _mm256_xor_pd(cosine, sign);
+    const __m256d facing = _mm256_cmp_pd(minus_cosine, min_cosine, _CMP_GE_OQ);
+    const __m256d distance = _mm256_div_pd(plane, cosine);
+    const __m256d behind_surface = _mm256_cmp_pd(distance, zero, _CMP_LT_OQ);
+    const __m256d ramp_here = _mm256_or_pd(_mm256_and_pd(behind_surface, _mm256_mul_pd(ramp, behind)),
+                                           _mm256_andnot_pd(behind_surface, ramp));
+    const __m256d magnitude = _mm256_andnot_pd(sign, distance);
+    const __m256d within = _mm256_cmp_pd(magnitude, ramp_here, _CMP_LE_OQ);
+    double bary[4][3];
+    for (int l = 0; l < 4; ++l) c[l]->shape->bary(c[l]->E, bary[l]);
+    __m256d conf = one;
+    if (has_confidence) {
+      const float* cf = frame.confidence.data();
+      __m256d term[3];
+      for (int v = 0; v < 3; ++v)
+        term[v] = _mm256_mul_pd(_mm256_set_pd(bary[3][v], bary[2][v], bary[1][v], bary[0][v]),
+                                _mm256_set_pd(cf[g[3]->idx[v]], cf[g[2]->idx[v]], cf[g[1]->idx[v]], cf[g[0]->idx[v]]));
+      conf = _mm256_add_pd(_mm256_add_pd(term[0], term[1]), term[2]);
+    }
+    const __m256d tent = _mm256_max_pd(_mm256_sub_pd(one, _mm256_div_pd(magnitude, ramp_here)), zero);
+    const __m256d weight = _mm256_mul_pd(_mm256_mul_pd(minus_cosine, tent), conf);
+    const __m256d positive = _mm256_cmp_pd(weight, zero, _CMP_GT_OQ);
+    const int accept =
+        _mm256_movemask_pd(_mm256_andnot_pd(beyond, _mm256_and_pd(_mm256_and_pd(facing, within), positive))) & level_ok;
+    alignas(16) float df[4], wf[4];
+    _mm_store_ps(df, _mm256_cvtpd_ps(distance));
+    _mm_store_ps(wf, _mm256_cvtpd_ps(weight));
+    Candidate* w[4];
+    for (int l = 0; l < 4; ++l) w[l] = &batch.cand[k[l]];
+    sample_colour_pair(g[0]->idx, g[1]->idx, bary[0], bary[1], packed, &w[0]->sample, &w[1]->sample);
+    sample_colour_pair(g[2]->idx, g[3]->idx, bary[2], bary[3], packed, &w[2]->sample, &w[3]->sample);
+    for (int l = 0; l < 4; ++l) {
+      VoxelSample& s = w[l]->sample;
+      s.distance = df[l];
+      s.weight = wf[l];
+      batch.sampled[sampled] = k[l];
+      sampled += std::size_t(accept >> l & 1);
+    }
+  }
+  return sampled;
+}
+
+bool cpu_has_avx2() { return __builtin_cpu_supports("avx2"); }
+#else
+bool cpu_has_avx2() { return false; }
+#endif
+
 std::size_t sample_candidates(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
                               const IntegrateOptions& options, const std::uint32_t* packed, ItemBatch& batch,
-                              std::size_t owned) {
+                              std::size_t owned, bool avx2) {
+#if defined(__x86_64__) && defined(__GNUC__)
+  if (avx2) return sample_candidates_quads(p, frame, level, centre, options, packed, batch, owned);
+#endif
 #if defined(__SSE2__) && defined(__x86_64__)
   return sample_candidates_pairs(p, frame, level, centre, options, packed, batch, owned);
 #else
@@ -1129,7 +1246,7 @@ bool has_prisms(const Prepared& p, int tile, int level) {
 struct IntegrateScratch::Tables {
   Prepared prepared;
 };
-IntegrateScratch::IntegrateScratch() : tables(std::make_unique<Tables>()) {}
+IntegrateScratch::IntegrateScratch() : tables(std::make_unique<Tables>()), wide_lanes(cpu_has_avx2()) {}
 IntegrateScratch::~IntegrateScratch() = default;
 std::size_t IntegrateScratch::bytes() const {
   const Prepared& p = tables->prepared;
@@ -1156,6 +1273,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
   IntegrateStats stats = p.stats;
+  const bool avx2 = scratch ? scratch->wide_lanes : cpu_has_avx2();
   const std::uint32_t* packed = p.colour.empty() ? nullptr : p.colour.data();
   // Work items (tile, level), ordered by the brick around their middle ("home"), so that items
   // run brick region by brick region.
@@ -1349,7 +1467,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             batch.owned[owned++] = k;
           }
           // Phase 3: distance, weight and colour.
-          const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned);
+          const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned, avx2);
           // Phase 4: the voxels, each asked for ahead of its write. A column crosses a group (a 4^3
           // region of 2^3 blocks, voxel_table.h) every 2^glog voxels, so a voxel's group is mostly
           // the one in hand, and the key, its origin and the block cache are consulted once per

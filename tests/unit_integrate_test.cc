@@ -462,29 +462,37 @@ TEST(Integrate, VoxelCentricEnumerationEqualsPrisms) {
       IntegrateOptions opt;
       opt.gamma = gamma;
       opt.coarser_levels = 3;
-      BrickMap prisms(2), projective(3);
+      BrickMap prisms(2);
       const IntegrateStats a = integrate_frame_prisms(f, tris, root, opt, prisms);
-      IntegrateStats b;
-      ASSERT_TRUE(integrate_frame_projective(f, tris, root, opt, projective, &b));
-      EXPECT_EQ(a.triangles, b.triangles);
-      EXPECT_EQ(a.contributions, b.contributions);
       ASSERT_GT(a.contributions, 1000u);
-      std::size_t compared = 0, levels = 0;
-      std::set<int> seen_levels;
-      for (Brick* br : prisms.bricks())
-        br->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
-          const VoxelData* w = projective.find(k);
-          ASSERT_NE(w, nullptr) << "level " << k.level() << " voxel " << k.x() << "," << k.y() << "," << k.z();
-          EXPECT_EQ(v.distance, w->distance);
-          EXPECT_EQ(v.weight, w->weight);
-          for (int c = 0; c < 3; ++c) EXPECT_EQ(v.colour_fixed[c], w->colour_fixed[c]);
-          EXPECT_EQ(v.colour_share, w->colour_share);
-          seen_levels.insert(k.level());
-          ++compared;
-        });
-      levels = seen_levels.size();
-      EXPECT_EQ(compared, projective.voxel_count());
-      EXPECT_GE(levels, 4u);
+      // The sample phase in AVX2's four lanes (where the CPU has them) and in SSE2's two.
+      for (bool wide : {true, false}) {
+        SCOPED_TRACE(wide ? "wide lanes" : "two lanes");
+        IntegrateScratch scratch;
+        if (wide && !scratch.wide_lanes) continue;  // no AVX2 on this CPU
+        scratch.wide_lanes = wide;
+        BrickMap projective(3);
+        IntegrateStats b;
+        ASSERT_TRUE(integrate_frame_projective(f, tris, root, opt, projective, &b, nullptr, &scratch));
+        EXPECT_EQ(a.triangles, b.triangles);
+        EXPECT_EQ(a.contributions, b.contributions);
+        std::size_t compared = 0, levels = 0;
+        std::set<int> seen_levels;
+        for (Brick* br : prisms.bricks())
+          br->voxels.for_each([&](VoxelKey k, const VoxelData& v) {
+            const VoxelData* w = projective.find(k);
+            ASSERT_NE(w, nullptr) << "level " << k.level() << " voxel " << k.x() << "," << k.y() << "," << k.z();
+            EXPECT_EQ(v.distance, w->distance);
+            EXPECT_EQ(v.weight, w->weight);
+            for (int c = 0; c < 3; ++c) EXPECT_EQ(v.colour_fixed[c], w->colour_fixed[c]);
+            EXPECT_EQ(v.colour_share, w->colour_share);
+            seen_levels.insert(k.level());
+            ++compared;
+          });
+        levels = seen_levels.size();
+        EXPECT_EQ(compared, projective.voxel_count());
+        EXPECT_GE(levels, 4u);
+      }
     }
   }
 }
