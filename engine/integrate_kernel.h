@@ -10,7 +10,7 @@
 #include <cmath>
 #include <cstdint>
 #if defined(__SSE2__) && defined(__x86_64__)
-#include <emmintrin.h>
+#include <immintrin.h>
 #endif
 
 #include "engine/depth_frame.h"
@@ -255,6 +255,42 @@ inline void interpolate_colour_pair(const double bary0[3], const double bary1[3]
   out1[0] = std::uint8_t(_mm_cvtsi128_si32(_mm_srli_si128(ib, 4)));
   out1[1] = std::uint8_t(_mm_cvtsi128_si32(ic));
   out1[2] = std::uint8_t(_mm_cvtsi128_si32(_mm_srli_si128(ic, 4)));
+}
+
+// interpolate_colour_scalar for four contributions, one per AVX2 lane (integrate_projective.cc's
+// sample phase, where the CPU has AVX2): bary[j] holds vertex j's barycentric coordinate in each
+// lane and c[j] its packed colour; returns each lane's channels as a packed_colour word. Each
+// channel is the scalar reference's products and sums in its order, and colour_byte's clamp,
+// truncation and rounding up, so the same bytes.
+__attribute__((target("avx2"))) inline __m128i colour_bytes_quad(__m256d v) {
+  v = _mm256_min_pd(_mm256_max_pd(v, _mm256_setzero_pd()), _mm256_set1_pd(255.0));
+  const __m128i i = _mm256_cvttpd_epi32(v);
+  const __m256d up = _mm256_cmp_pd(_mm256_sub_pd(v, _mm256_cvtepi32_pd(i)), _mm256_set1_pd(0.5), _CMP_GE_OQ);
+  // Each lane's 64-bit mask as a 32-bit one (-1 where it rounds up).
+  const __m256i low_halves = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
+  return _mm_sub_epi32(i, _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(_mm256_castpd_si256(up), low_halves)));
+}
+__attribute__((target("avx2"))) inline __m128i interpolate_colour_quad(const __m256d bary[3], const __m128i c[3]) {
+  const __m128i byte = _mm_set1_epi32(255);
+  __m256d channel[3];
+  for (int j = 0; j < 3; ++j)
+    for (int k = 0; k < 3; ++k) {
+      const __m256d term = _mm256_mul_pd(bary[j], _mm256_cvtepi32_pd(_mm_and_si128(_mm_srli_epi32(c[j], 8 * k), byte)));
+      channel[k] = j == 0 ? term : _mm256_add_pd(channel[k], term);
+    }
+  return _mm_or_si128(colour_bytes_quad(channel[0]), _mm_or_si128(_mm_slli_epi32(colour_bytes_quad(channel[1]), 8),
+                                                                  _mm_slli_epi32(colour_bytes_quad(channel[2]), 16)));
+}
+// The same on arrays (for tests): bary[j][lane], c[j][lane], out[lane].
+__attribute__((target("avx2"))) inline void interpolate_colour_quad(const double bary[3][4], const std::uint32_t c[3][4],
+                                                                    std::uint32_t out[4]) {
+  __m256d b[3];
+  __m128i w[3];
+  for (int j = 0; j < 3; ++j) {
+    b[j] = _mm256_loadu_pd(bary[j]);
+    w[j] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(c[j]));
+  }
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(out), interpolate_colour_quad(b, w));
 }
 #else
 inline void interpolate_colour(const double bary[3], const std::uint32_t c[3], std::uint8_t out[3]) {

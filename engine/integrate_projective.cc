@@ -24,6 +24,8 @@
 #include <atomic>
 #include <bit>
 #include <cmath>
+#include <cstddef>
+#include <cstring>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -1113,6 +1115,16 @@ std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, 
 #endif
 
 #if defined(__x86_64__) && defined(__GNUC__)
+// The sample phase's four lanes read a candidate's X and E, and an owner's normal and inv_opp,
+// four doubles at a time, and write a sample's distance and weight, and its colour bytes and
+// has_colour, one word each.
+static_assert(offsetof(VoxelSample, weight) == offsetof(VoxelSample, distance) + 4);
+static_assert(offsetof(VoxelSample, has_colour) == offsetof(VoxelSample, colour) + 3);
+static_assert(offsetof(Candidate, uv) >= offsetof(Candidate, X) + 32 &&
+              offsetof(Candidate, shape) == offsetof(Candidate, E) + 24);
+static_assert(offsetof(GridTriangle, P0) == offsetof(GridTriangle, normal) + 24 &&
+              offsetof(GridTriangle, idx) == offsetof(GridTriangle, P0) + 12);
+static_assert(sizeof(Ownership) >= offsetof(Ownership, inv_opp) + 32);
 // Rows (x, y, z, anything) of four records to lanes x, y, z.
 __attribute__((target("avx2"))) inline void transpose3(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d* x,
                                                        __m256d* y, __m256d* z) {
@@ -1184,14 +1196,19 @@ __attribute__((target("avx2"))) std::size_t sample_candidates_quads(const Prepar
                                            _mm256_andnot_pd(behind_surface, ramp));
     const __m256d magnitude = _mm256_andnot_pd(sign, distance);
     const __m256d within = _mm256_cmp_pd(magnitude, ramp_here, _CMP_LE_OQ);
-    double bary[4][3];
-    for (int l = 0; l < 4; ++l) c[l]->shape->bary(c[l]->E, bary[l]);
+    // Ownership::bary in lanes: the edge functions times the owners' inverse opposite values.
+    __m256d E[3], inv[3], bary[3];
+    transpose3(_mm256_loadu_pd(c[0]->E), _mm256_loadu_pd(c[1]->E), _mm256_loadu_pd(c[2]->E), _mm256_loadu_pd(c[3]->E),
+               &E[0], &E[1], &E[2]);
+    transpose3(_mm256_loadu_pd(c[0]->shape->inv_opp), _mm256_loadu_pd(c[1]->shape->inv_opp),
+               _mm256_loadu_pd(c[2]->shape->inv_opp), _mm256_loadu_pd(c[3]->shape->inv_opp), &inv[0], &inv[1], &inv[2]);
+    for (int v = 0; v < 3; ++v) bary[v] = _mm256_mul_pd(E[v], inv[v]);
     __m256d conf = one;
     if (has_confidence) {
       const float* cf = frame.confidence.data();
       __m256d term[3];
       for (int v = 0; v < 3; ++v)
-        term[v] = _mm256_mul_pd(_mm256_set_pd(bary[3][v], bary[2][v], bary[1][v], bary[0][v]),
+        term[v] = _mm256_mul_pd(bary[v],
                                 _mm256_set_pd(cf[g[3]->idx[v]], cf[g[2]->idx[v]], cf[g[1]->idx[v]], cf[g[0]->idx[v]]));
       conf = _mm256_add_pd(_mm256_add_pd(term[0], term[1]), term[2]);
     }
@@ -1200,17 +1217,26 @@ __attribute__((target("avx2"))) std::size_t sample_candidates_quads(const Prepar
     const __m256d positive = _mm256_cmp_pd(weight, zero, _CMP_GT_OQ);
     const int accept =
         _mm256_movemask_pd(_mm256_andnot_pd(beyond, _mm256_and_pd(_mm256_and_pd(facing, within), positive))) & level_ok;
-    alignas(16) float df[4], wf[4];
-    _mm_store_ps(df, _mm256_cvtpd_ps(distance));
-    _mm_store_ps(wf, _mm256_cvtpd_ps(weight));
-    Candidate* w[4];
-    for (int l = 0; l < 4; ++l) w[l] = &batch.cand[k[l]];
-    sample_colour_pair(g[0]->idx, g[1]->idx, bary[0], bary[1], packed, &w[0]->sample, &w[1]->sample);
-    sample_colour_pair(g[2]->idx, g[3]->idx, bary[2], bary[3], packed, &w[2]->sample, &w[3]->sample);
+    // Each lane's colour and has_colour as one word (sample_colour_pair's bytes).
+    __m128i colour = _mm_setzero_si128();
+    if (packed) {
+      __m128i vertex[3];
+      for (int v = 0; v < 3; ++v)
+        vertex[v] = _mm_set_epi32(int(packed[g[3]->idx[v]]), int(packed[g[2]->idx[v]]), int(packed[g[1]->idx[v]]),
+                                  int(packed[g[0]->idx[v]]));
+      colour = _mm_or_si128(interpolate_colour_quad(bary, vertex), _mm_set1_epi32(1 << 24));
+    }
+    // Distance and weight side by side per lane: (d0 w0 d1 w1), (d2 w2 d3 w3).
+    const __m128 df = _mm256_cvtpd_ps(distance), wf = _mm256_cvtpd_ps(weight);
+    alignas(16) float dw[8];
+    alignas(16) std::uint32_t word[4];
+    _mm_store_ps(dw, _mm_unpacklo_ps(df, wf));
+    _mm_store_ps(dw + 4, _mm_unpackhi_ps(df, wf));
+    _mm_store_si128(reinterpret_cast<__m128i*>(word), colour);
     for (int l = 0; l < 4; ++l) {
-      VoxelSample& s = w[l]->sample;
-      s.distance = df[l];
-      s.weight = wf[l];
+      VoxelSample& s = batch.cand[k[l]].sample;
+      std::memcpy(&s.distance, dw + 2 * l, 8);
+      std::memcpy(s.colour, word + l, 4);
       batch.sampled[sampled] = k[l];
       sampled += std::size_t(accept >> l & 1);
     }

@@ -319,6 +319,26 @@ TEST(IntegrateKernel, ColourInLanesEqualsTheScalarReference) {
       ASSERT_EQ(int(pair[0][k]), int(scalar[k])) << bary[0] << " " << bary[1] << " " << bary[2] << " channel " << k;
       ASSERT_EQ(int(pair[1][k]), int(scalar2[k])) << bary2[0] << " " << bary2[1] << " " << bary2[2] << " channel " << k;
     }
+#if defined(__SSE2__) && defined(__x86_64__)
+    // Four at once (AVX2 where the CPU has it): the two above and two more rotations.
+    if (__builtin_cpu_supports("avx2")) {
+      const double bary3[3] = {bary[1], bary[2], bary[0]}, bary4[3] = {bary[2], bary[1], bary[0]};
+      const std::uint32_t cp3[3] = {cp[2], cp[0], cp[1]}, cp4[3] = {cp[2], cp[1], cp[0]};
+      const double* bs[4] = {bary, bary2, bary3, bary4};
+      const std::uint32_t* cs[4] = {cp, cp2, cp3, cp4};
+      double lane_bary[3][4];
+      std::uint32_t lane_colour[3][4], words[4];
+      for (int l = 0; l < 4; ++l)
+        for (int j = 0; j < 3; ++j) lane_bary[j][l] = bs[l][j], lane_colour[j][l] = cs[l][j];
+      integrate_detail::interpolate_colour_quad(lane_bary, lane_colour, words);
+      for (int l = 0; l < 4; ++l) {
+        std::uint8_t ref[3];
+        integrate_detail::interpolate_colour_scalar(bs[l], cs[l], ref);
+        ASSERT_EQ(words[l], std::uint32_t(ref[0]) | std::uint32_t(ref[1]) << 8 | std::uint32_t(ref[2]) << 16)
+            << "lane " << l << ": " << bs[l][0] << " " << bs[l][1] << " " << bs[l][2];
+      }
+    }
+#endif
   };
   for (int i = 0; i < 200000; ++i) {
     const double bary[3] = {b(rng), b(rng), b(rng)};
