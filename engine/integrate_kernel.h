@@ -257,6 +257,7 @@ inline void interpolate_colour_pair(const double bary0[3], const double bary1[3]
   out1[2] = std::uint8_t(_mm_cvtsi128_si32(_mm_srli_si128(ic, 4)));
 }
 
+#if defined(__GNUC__)
 // interpolate_colour_scalar for four contributions, one per AVX2 lane (integrate_projective.cc's
 // sample phase, where the CPU has AVX2): bary[j] holds vertex j's barycentric coordinate in each
 // lane and c[j] its packed colour; returns each lane's channels as a packed_colour word. Each
@@ -292,6 +293,7 @@ __attribute__((target("avx2"))) inline void interpolate_colour_quad(const double
   }
   _mm_storeu_si128(reinterpret_cast<__m128i*>(out), interpolate_colour_quad(b, w));
 }
+#endif
 #else
 inline void interpolate_colour(const double bary[3], const std::uint32_t c[3], std::uint8_t out[3]) {
   interpolate_colour_scalar(bary, c, out);

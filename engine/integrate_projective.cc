@@ -1114,13 +1114,14 @@ std::size_t sample_candidates_pairs(const Prepared& p, const DepthFrame& frame, 
 }
 #endif
 
-#if defined(__x86_64__) && defined(__GNUC__)
-// The sample phase's four lanes read a candidate's X and E, and an owner's normal and inv_opp,
-// four doubles at a time, and write a sample's distance and weight, and its colour bytes and
-// has_colour, one word each.
+#if defined(__SSE2__) && defined(__x86_64__) && defined(__GNUC__)
+// The sample phase's four lanes read four doubles at a time from a candidate's X and E, its
+// owner's normal and its shape's inv_opp (the fourth lane discarded), and four floats from the
+// owner's P0; they write a sample's distance and weight as one 8-byte word, and its colour bytes
+// and has_colour as one 4-byte word.
 static_assert(offsetof(VoxelSample, weight) == offsetof(VoxelSample, distance) + 4);
 static_assert(offsetof(VoxelSample, has_colour) == offsetof(VoxelSample, colour) + 3);
-static_assert(offsetof(Candidate, uv) >= offsetof(Candidate, X) + 32 &&
+static_assert(sizeof(Candidate) >= offsetof(Candidate, X) + 32 &&
               offsetof(Candidate, shape) == offsetof(Candidate, E) + 24);
 static_assert(offsetof(GridTriangle, P0) == offsetof(GridTriangle, normal) + 24 &&
               offsetof(GridTriangle, idx) == offsetof(GridTriangle, P0) + 12);
@@ -1137,9 +1138,11 @@ __attribute__((target("avx2"))) inline void transpose3(__m256d r0, __m256d r1, _
 
 // sample_candidates_pairs four candidates at a time, in AVX2's four double lanes where the CPU has
 // them (integrate_frame_projective asks): the same operations in the same order, so the same bits
-// (AVX2 without FMA: no multiply and add is fused). The candidates' centres and the owners'
-// normals and first vertices are read a whole record row at a time and transposed into lanes,
-// rather than put together lane by lane.
+// for every accepted candidate (no multiply and add is fused: AVX2 without FMA, and the build's
+// -ffp-contract=off). The candidates' centres and edge functions, the owners' normals and first
+// vertices and their shapes' inverse opposite values are read a record row at a time and
+// transposed into lanes, rather than put together lane by lane; barycentric coordinates,
+// confidence and colour are worked out in the lanes too.
 __attribute__((target("avx2"))) std::size_t sample_candidates_quads(const Prepared& p, const DepthFrame& frame,
                                                                      int level, const Vector3d& centre,
                                                                      const IntegrateOptions& options,
@@ -1235,8 +1238,9 @@ __attribute__((target("avx2"))) std::size_t sample_candidates_quads(const Prepar
     _mm_store_si128(reinterpret_cast<__m128i*>(word), colour);
     for (int l = 0; l < 4; ++l) {
       VoxelSample& s = batch.cand[k[l]].sample;
-      std::memcpy(&s.distance, dw + 2 * l, 8);
-      std::memcpy(s.colour, word + l, 4);
+      char* const bytes = reinterpret_cast<char*>(&s);
+      std::memcpy(bytes + offsetof(VoxelSample, distance), dw + 2 * l, 8);  // distance, weight
+      std::memcpy(bytes + offsetof(VoxelSample, colour), word + l, 4);     // colour, has_colour
       batch.sampled[sampled] = k[l];
       sampled += std::size_t(accept >> l & 1);
     }
@@ -1252,7 +1256,7 @@ bool cpu_has_avx2() { return false; }
 std::size_t sample_candidates(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
                               const IntegrateOptions& options, const std::uint32_t* packed, ItemBatch& batch,
                               std::size_t owned, bool avx2) {
-#if defined(__x86_64__) && defined(__GNUC__)
+#if defined(__SSE2__) && defined(__x86_64__) && defined(__GNUC__)
   if (avx2) return sample_candidates_quads(p, frame, level, centre, options, packed, batch, owned);
 #endif
 #if defined(__SSE2__) && defined(__x86_64__)
