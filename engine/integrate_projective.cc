@@ -11,9 +11,6 @@
 // evaluated once per level and depth map; ownership gives it at most one contribution, so tiles
 // write their voxels concurrently without locks (groups of blocks are created under their brick's
 // lock, blocks by a compare-and-swap in their group: storage/voxel_table.h).
-#if defined(__x86_64__)
-#include <immintrin.h>
-#endif
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -1255,9 +1252,9 @@ bool cpu_has_avx2() { return false; }
 
 std::size_t sample_candidates(const Prepared& p, const DepthFrame& frame, int level, const Vector3d& centre,
                               const IntegrateOptions& options, const std::uint32_t* packed, ItemBatch& batch,
-                              std::size_t owned, bool avx2) {
+                              std::size_t owned, bool wide_lanes) {
 #if defined(__SSE2__) && defined(__x86_64__) && defined(__GNUC__)
-  if (avx2) return sample_candidates_quads(p, frame, level, centre, options, packed, batch, owned);
+  if (wide_lanes) return sample_candidates_quads(p, frame, level, centre, options, packed, batch, owned);
 #endif
 #if defined(__SSE2__) && defined(__x86_64__)
   return sample_candidates_pairs(p, frame, level, centre, options, packed, batch, owned);
@@ -1303,7 +1300,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   const Eigen::Matrix3d& R = sensor.R;
   const Vector3d centre = sensor.centre();
   IntegrateStats stats = p.stats;
-  const bool avx2 = scratch ? scratch->wide_lanes : cpu_has_avx2();
+  const bool wide_lanes = scratch ? scratch->wide_lanes : cpu_has_avx2();
   const std::uint32_t* packed = p.colour.empty() ? nullptr : p.colour.data();
   // Work items (tile, level), ordered by the brick around their middle ("home"), so that items
   // run brick region by brick region.
@@ -1497,7 +1494,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             batch.owned[owned++] = k;
           }
           // Phase 3: distance, weight and colour.
-          const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned, avx2);
+          const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned, wide_lanes);
           // Phase 4: the voxels, each asked for ahead of its write. A column crosses a group (a 4^3
           // region of 2^3 blocks, voxel_table.h) every 2^glog voxels, so a voxel's group is mostly
           // the one in hand, and the key, its origin and the block cache are consulted once per
