@@ -371,7 +371,22 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
   try {
     ChunkWriter chunks(fd, tmp, pool);
     if (::lseek(fd, off_t(kHeaderBytes), SEEK_SET) < 0) throw_write_error(tmp.string(), "cannot write tile", errno);
-    for (const GroupView& b : blocks) {
+    // The groups lie scattered over the table's arena, so each one's voxels were a cache miss that
+    // stalled the presence scan: ask for a group some places ahead, and for its blocks' lines
+    // (a block is at most 2^3 voxels, two lines, 64-byte aligned) once the group has arrived.
+    constexpr std::size_t kGroupAhead = 16, kPartsAhead = 8;
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+      if (i + kGroupAhead < blocks.size()) __builtin_prefetch(blocks[i + kGroupAhead].group);
+      if (i + kPartsAhead < blocks.size()) {
+        const BlockGroup& ahead = *blocks[i + kPartsAhead].group;
+        for (int o = 0; o < 8; ++o) {
+          if (const VoxelData* v = ahead.part[o].load(std::memory_order_relaxed)) {
+            __builtin_prefetch(v);
+            __builtin_prefetch(v + 4);
+          }
+        }
+      }
+      const GroupView& b = blocks[i];
       const VoxelKey origin = b.origin;
       const int log = tile_block_log(origin.level(), brick_level);
       std::uint64_t mask;
