@@ -150,7 +150,9 @@ class BlockCache {
       : map_(map), thread_(unsigned(std::max(tbb::this_task_arena::current_thread_index(), 0))) {}
   // The group with origin `origin` holding `key`; `brick` is set to its brick.
   BlockGroup* group(VoxelKey key, VoxelKey origin, Brick** brick) {
-    Entry& e = slots_[std::hash<VoxelKey>{}(origin) & (kSlots - 1)];
+    // A multiplicative hash's top bits (the table's 64-bit mix cost more than the rare
+    // collisions this lets through).
+    Entry& e = slots_[(origin.bits * 0x9e3779b97f4a7c15ull) >> (64 - kSlotBits)];
     if (!e.group || e.origin != origin) {
       // The brick too is mostly the one of the group before: its lookup (a shared lock and a
       // hash map) was a third of a group's fetch.
@@ -175,7 +177,8 @@ class BlockCache {
     BlockGroup* group = nullptr;
     Brick* brick = nullptr;
   };
-  static constexpr std::size_t kSlots = 256;
+  static constexpr int kSlotBits = 8;
+  static constexpr std::size_t kSlots = std::size_t{1} << kSlotBits;
   BrickMap& map_;
   const unsigned thread_;
   std::uint64_t brick_id_ = ~std::uint64_t{0};  // the brick of the last group fetched (no brick has this id)
