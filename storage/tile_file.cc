@@ -77,9 +77,9 @@ bool smaller(const TileBuffers::Mapping& m, std::size_t capacity) { return m.cap
 
 constexpr char kMagic[8] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
 constexpr std::size_t kHeaderBytes = 64;  // 56 bytes of fields + their checksum
-// LZ4's acceleration: on the present voxels of igea's field, 4 compressed 1.8x faster than 1 for
-// 2.5 % more bytes (a checkpoint compresses the whole field; bench/README.md, session 31).
-constexpr int kAcceleration = 4;
+// LZ4's acceleration (formats 5 and 6; format 7's, below, per half of the planes): on the
+// present voxels of igea's field, 4 compressed 1.8x faster than 1 for 2.5 % more bytes (a
+// checkpoint compresses the whole field; bench/README.md, session 31).
 // Bytes of one voxel in a tile: formats 3 and 4 store VoxelData's 16 bytes (two float32, four
 // u16); formats 1 and 2 stored six float32 (colour and colour weight as floats).
 constexpr std::size_t record_bytes(std::uint32_t version) { return version >= 3 ? 16 : 24; }
@@ -99,6 +99,18 @@ constexpr bool stores_chunks(std::uint32_t version) { return version >= 5; }
 // igea's checkpoint 0.89 -> 0.67 of the raw size, with less to write and sync for about as much
 // compression time (bench/README.md, session 35).
 constexpr bool stores_planes(std::uint32_t version) { return version >= 6; }
+// From format 7 the planes are two LZ4 blocks, behind the u32 stored size of the first: the
+// field's (planes 0-7, the bytes of distance and weight) at acceleration 4, and the colour's
+// (planes 8-15: colour and colour share) at 16. The colour's planes compressed worst (0.6-0.75 of
+// their size on igea) for most of LZ4's time; at 16 igea's checkpoint compresses in 0.72 of the
+// time for 4.4 % more bytes (bench/README.md, session 45).
+constexpr bool stores_plane_halves(std::uint32_t version) { return version >= 7; }
+constexpr int kFieldAcceleration = 4, kColourAcceleration = 16;
+// The most a chunk of `raw_n` raw bytes may store (LZ4's bound on its block or blocks).
+std::uint64_t stored_bound(std::uint32_t version, std::uint32_t raw_n) {
+  if (!stores_plane_halves(version)) return std::uint64_t(LZ4_compressBound(int(raw_n)));
+  return 4 + 2 * std::uint64_t(LZ4_compressBound(int(raw_n / 2)));
+}
 constexpr std::size_t kChunkRaw = std::size_t{256} << 10;  // raw bytes of the writer's chunks, at most
 constexpr std::size_t kMaxChunkRaw = std::size_t{1} << 20;  // what a reader accepts
 // u32 raw bytes, u32 stored bytes, u64 XXH3-64 of the stored bytes: a chunk is checked before it
@@ -191,13 +203,14 @@ XXH3State new_xxh3_state() {
   return s;
 }
 
-// The stored payload of a format-6 tile, streamed to `fd` chunk by chunk: blocks are packed into
+// The stored payload of a format-7 tile, streamed to `fd` chunk by chunk: blocks are packed into
 // the raw chunk until the next might not fit, then the chunk is compressed, hashed and written.
 class ChunkWriter {
  public:
   ChunkWriter(int fd, const std::filesystem::path& path, TileBuffers& pool)
       : fd_(fd), path_(path), raw_(kChunkRaw, pool), planes_(kChunkRaw, pool),
-        stored_(kChunkHeader + std::size_t(LZ4_compressBound(int(kChunkRaw))), pool), hash_(new_xxh3_state()) {}
+        stored_(kChunkHeader + std::size_t(stored_bound(kTileVersion, std::uint32_t(kChunkRaw))), pool),
+        hash_(new_xxh3_state()) {}
 
   // Room for `n` <= kMaxBlockRaw raw bytes; commit(n) after filling them.
   unsigned char* reserve(std::size_t n) {
@@ -221,10 +234,17 @@ class ChunkWriter {
     if (used_ == 0) return;
     unsigned char* out = stored_.data();
     to_byte_planes(raw_.data(), used_ / kPlaneUnit, planes_.data());  // every block is whole units
-    const int packed = LZ4_compress_fast(reinterpret_cast<const char*>(planes_.data()),
-                                         reinterpret_cast<char*>(out + kChunkHeader), int(used_),
-                                         int(stored_.size() - kChunkHeader), kAcceleration);
-    if (packed <= 0) throw std::runtime_error(path_.string() + ": LZ4 compression failed");
+    const int half = int(used_ / 2);  // whole units: planes 0-7, then 8-15
+    const int capacity = int(stored_.size() - kChunkHeader - 4);
+    char* const first = reinterpret_cast<char*>(out + kChunkHeader + 4);
+    const int field = LZ4_compress_fast(reinterpret_cast<const char*>(planes_.data()), first, half, capacity,
+                                        kFieldAcceleration);
+    const int colour = field <= 0 ? 0
+                                  : LZ4_compress_fast(reinterpret_cast<const char*>(planes_.data() + half), first + field,
+                                                      half, capacity - field, kColourAcceleration);
+    if (field <= 0 || colour <= 0) throw std::runtime_error(path_.string() + ": LZ4 compression failed");
+    put32(out + kChunkHeader, std::uint32_t(field));
+    const int packed = 4 + field + colour;
     put32(out, std::uint32_t(used_));
     put32(out + 4, std::uint32_t(packed));
     put64(out + 8, XXH3_64bits(out + kChunkHeader, std::size_t(packed)));
@@ -644,7 +664,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
     if (stores_chunks(version)) {
       // Chunk by chunk: each is hashed, decompressed and decoded before the next is read.
       const bool any = stored_size > 0;  // an empty brick's tile has no chunk
-      PageBuffer stored(any ? kChunkHeader + std::size_t(LZ4_compressBound(int(kMaxChunkRaw))) : 0, pool);
+      PageBuffer stored(any ? kChunkHeader + std::size_t(stored_bound(version, std::uint32_t(kMaxChunkRaw))) : 0, pool);
       PageBuffer raw(any ? kMaxChunkRaw : 0, pool);
       PageBuffer planes(any && stores_planes(version) ? kMaxChunkRaw : 0, pool);
       const XXH3State hash = new_xxh3_state();
@@ -660,7 +680,7 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
           throw bad(which + " of " + std::to_string(raw_n) + " raw bytes (1 to " + std::to_string(kMaxChunkRaw) + ")");
         if (stores_planes(version) && raw_n % kPlaneUnit != 0)
           throw bad(which + " of " + std::to_string(raw_n) + " raw bytes, not whole 16-byte units");
-        if (stored_n == 0 || stored_n > std::uint32_t(LZ4_compressBound(int(raw_n))) || stored_n > left - kChunkHeader)
+        if (stored_n == 0 || stored_n > stored_bound(version, raw_n) || stored_n > left - kChunkHeader)
           throw bad(which + " of " + std::to_string(stored_n) + " stored bytes does not fit");
         in.read(reinterpret_cast<char*>(s + kChunkHeader), std::streamsize(stored_n));
         if (!in) throw bad("cannot read " + which);
@@ -670,9 +690,22 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
         raw_seen += raw_n;
         if (raw_seen > raw_size) throw bad("chunks hold more than the header's " + std::to_string(raw_size) + " raw bytes");
         unsigned char* unpacked = stores_planes(version) ? planes.data() : raw.data();
-        const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(s + kChunkHeader),
-                                          reinterpret_cast<char*>(unpacked), int(stored_n), int(raw_n));
-        if (n < 0 || std::uint32_t(n) != raw_n) throw bad(which + " does not decompress to its stated size");
+        if (stores_plane_halves(version)) {
+          // Two LZ4 blocks, each half of the planes, behind the first's stored size.
+          const std::uint32_t field = stored_n >= 4 ? get32(s + kChunkHeader) : 0;
+          if (stored_n < 4 || field == 0 || field >= stored_n - 4)
+            throw bad(which + "'s halves do not fit its " + std::to_string(stored_n) + " stored bytes");
+          const char* packed = reinterpret_cast<const char*>(s + kChunkHeader + 4);
+          const int half = int(raw_n / 2);
+          const int a = LZ4_decompress_safe(packed, reinterpret_cast<char*>(unpacked), int(field), half);
+          const int b = LZ4_decompress_safe(packed + field, reinterpret_cast<char*>(unpacked) + half,
+                                            int(stored_n - 4 - field), half);
+          if (a != half || b != half) throw bad(which + " does not decompress to its stated size");
+        } else {
+          const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(s + kChunkHeader),
+                                            reinterpret_cast<char*>(unpacked), int(stored_n), int(raw_n));
+          if (n < 0 || std::uint32_t(n) != raw_n) throw bad(which + " does not decompress to its stated size");
+        }
         if (stores_planes(version)) from_byte_planes(planes.data(), raw_n / kPlaneUnit, raw.data());
         reserve_for(raw_n);
         // A chunk holds whole blocks.

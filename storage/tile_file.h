@@ -8,16 +8,17 @@
 //   | u64 XXH3-64 of the 56 header bytes before it | stored payload
 // The stored payload is the raw payload in chunks of whole blocks, each its u32 raw bytes (at
 // most 1 MiB; written at most 256 KiB; whole 16-byte units), u32 stored bytes, u64 XXH3-64 of the
-// stored bytes and an LZ4 block of the chunk's byte planes (storage/byte_planes.h), so that tiles
-// are written and read through buffers of one chunk; the header's payload checksum is then that
-// of the chunk headers. The raw payload is the brick's blocks in
+// stored bytes and the chunk's byte planes (storage/byte_planes.h) as two LZ4 blocks, planes 0-7
+// (distance and weight) then 8-15 (colour), behind the u32 stored bytes of the first, so that
+// tiles are written and read through buffers of one chunk; the header's payload checksum is then
+// that of the chunk headers. The raw payload is the brick's blocks in
 // ascending origin-key order, each as its u64 origin key, a u64 mask of its present voxels
 // (weight != 0; bit i for voxel i of its 2^(3k), x fastest) and the present voxels' records of 16
 // bytes (distance, weight as float32; colour[3] in 1/256 steps and the colour share in 1/65535 of
 // the weight as u16; see VoxelData). Blocks are sorted, so a brick's tile is byte-identical
 // however its voxels were inserted.
-// Older formats are still read: version 5 compressed each chunk's raw bytes rather than their
-// byte planes; version 4 stored the raw payload as one LZ4 block; version 3
+// Older formats are still read: version 6 compressed a chunk's planes as one LZ4 block; version 5
+// compressed each chunk's raw bytes rather than their byte planes; version 4 stored the raw payload as one LZ4 block; version 3
 // stored every voxel of a block, absent ones as zeros; version 2 stored 24-byte voxels (distance,
 // weight, colour[3], colour weight as float32), version 1 also checksummed with FNV-1a, which
 // hashes under 1 GB/s, about a twentieth of XXH3's speed (every tile is hashed when written and
@@ -27,7 +28,7 @@
 // (and the directory is fsynced), so a tile is either the old one or the new one after a crash;
 // a job's store skips the per-file syncs and syncs once per checkpoint instead.
 // Reads check everything a damaged or foreign file could get wrong and throw InputError naming
-// the tile; they never allocate more than one chunk's bound (formats 5 and 6) or the header's sizes allow
+// the tile; they never allocate more than one chunk's bound (formats 5 to 7) or the header's sizes allow
 // for a file of that length (formats 1 to 4).
 #include <cstddef>
 #include <cstdint>
@@ -40,7 +41,7 @@
 
 namespace sf {
 
-inline constexpr std::uint32_t kTileVersion = 6;
+inline constexpr std::uint32_t kTileVersion = 7;
 
 // The checksum of a tile of format `version` (1 to 4) over `size` bytes.
 std::uint64_t tile_checksum(std::uint32_t version, const void* data, std::size_t size);

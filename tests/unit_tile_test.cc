@@ -234,10 +234,11 @@ std::vector<unsigned char> planes_by_hand(const std::vector<unsigned char>& in, 
   return out;
 }
 
-// A tile of format 5 or 6 around raw chunks given one by one (sizes, checksums all valid), laid out
+// A tile of format 5 to 7 around raw chunks given one by one (sizes, checksums all valid), laid out
 // from the format's description: each chunk behind its raw and stored sizes and the XXH3-64 of its
-// stored bytes, LZ4 (at the writer's acceleration, 4) of its raw bytes (5) or of their byte planes
-// (6); the header's payload checksum is that of the chunk headers.
+// stored bytes, LZ4 (at acceleration 4) of its raw bytes (5) or of their byte planes (6), or (7)
+// the planes' first half at acceleration 4 and their second at 16, behind the u32 stored size of
+// the first; the header's payload checksum is that of the chunk headers.
 std::vector<char> chunked_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::uint32_t block_count,
                                const std::vector<std::vector<unsigned char>>& chunks);
 
@@ -324,9 +325,22 @@ std::vector<char> chunked_tile(std::uint32_t version, BrickCoord coord, int bric
   std::uint64_t raw_bytes = 0;
   for (const auto& raw : chunks) {
     const std::vector<unsigned char> input = version >= 6 ? planes_by_hand(raw, true) : raw;
-    std::vector<char> packed(std::size_t(LZ4_compressBound(int(input.size()))));
-    packed.resize(std::size_t(LZ4_compress_fast(reinterpret_cast<const char*>(input.data()), packed.data(),
-                                                int(input.size()), int(packed.size()), 4)));
+    auto lz4 = [](const unsigned char* data, std::size_t size, int acceleration) {
+      std::vector<char> out(static_cast<std::size_t>(LZ4_compressBound(int(size))));
+      out.resize(std::size_t(
+          LZ4_compress_fast(reinterpret_cast<const char*>(data), out.data(), int(size), int(out.size()), acceleration)));
+      return out;
+    };
+    std::vector<char> packed;
+    if (version >= 7) {
+      const std::size_t half = input.size() / 2;
+      const std::vector<char> field = lz4(input.data(), half, 4), colour = lz4(input.data() + half, half, 16);
+      for (int i = 0; i < 4; ++i) packed.push_back(static_cast<char>(field.size() >> (8 * i)));
+      packed.insert(packed.end(), field.begin(), field.end());
+      packed.insert(packed.end(), colour.begin(), colour.end());
+    } else {
+      packed = lz4(input.data(), input.size(), 4);
+    }
     std::vector<unsigned char> header;
     put_le(header, raw.size(), 4);
     put_le(header, packed.size(), 4);
@@ -351,12 +365,12 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   const auto dir = scratch_dir("tile_versions");
   VoxelTable t(3);
   fill(t, sample_voxels());
-  const auto path = dir / "v6.tile";
+  const auto path = dir / "v7.tile";
   write_tile(path, {2, 0, 2}, t);
   const std::vector<char> bytes = bytes_of(path);
-  EXPECT_EQ(bytes[8], 6);  // this build writes format 6
+  EXPECT_EQ(bytes[8], 7);  // this build writes format 7
   // ... byte for byte as the format's description lays it out.
-  EXPECT_EQ(bytes, legacy_tile(6, {2, 0, 2}, t));
+  EXPECT_EQ(bytes, legacy_tile(7, {2, 0, 2}, t));
   // Format 3's 16-byte voxels against formats 1-2's 24: the same voxels, a smaller raw payload;
   // format 4 keeps the present voxels only, behind a u64 mask per block.
   const std::vector<char> v2 = legacy_tile(2, {2, 0, 2}, t);
@@ -383,7 +397,12 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   const std::vector<char> v5 = legacy_tile(5, {2, 0, 2}, t);
   EXPECT_EQ(raw_size(v5), raw_size(bytes));
   write_bytes(dir / "v5.tile", v5);
-  for (const char* name : {"v1.tile", "v2.tile", "v3.tile", "v4.tile", "v5.tile", "v6.tile"}) {
+  // Format 6 is format 7's planes as one LZ4 block.
+  const std::vector<char> v6 = legacy_tile(6, {2, 0, 2}, t);
+  EXPECT_EQ(raw_size(v6), raw_size(bytes));
+  EXPECT_NE(v6, bytes);
+  write_bytes(dir / "v6.tile", v6);
+  for (const char* name : {"v1.tile", "v2.tile", "v3.tile", "v4.tile", "v5.tile", "v6.tile", "v7.tile"}) {
     SCOPED_TRACE(name);
     VoxelTable b(3);
     read_tile(dir / name, b);
@@ -444,11 +463,11 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
     VoxelTable fresh(3);
     read_tile(dir / "relabelled3.tile", fresh);
   }, "relabelled3.tile", "damaged tile");
-  write_bytes(dir / "v7.tile", rewrite(bytes, 7, xxh3));
+  write_bytes(dir / "v8.tile", rewrite(bytes, 8, xxh3));
   expect_input_error([&] {
     VoxelTable fresh(3);
-    read_tile(dir / "v7.tile", fresh);
-  }, "v7.tile", "format version 7, this build reads 1 to 6");
+    read_tile(dir / "v8.tile", fresh);
+  }, "v8.tile", "format version 8, this build reads 1 to 7");
 }
 
 // Format 4 stores a mask of the present voxels per block: erased voxels (weight < 0) are present
@@ -637,8 +656,18 @@ std::vector<std::vector<unsigned char>> raw_chunks(const std::vector<char>& tile
   for (std::size_t at = 64; at < tile.size();) {
     const std::uint32_t raw_n = get32(at), stored_n = get32(at + 4);
     std::vector<unsigned char> raw(raw_n);
-    EXPECT_EQ(LZ4_decompress_safe(tile.data() + at + 16, reinterpret_cast<char*>(raw.data()), int(stored_n), int(raw_n)),
-              int(raw_n));
+    if (get32(8) >= 7) {  // two halves of the planes, behind the first's stored size
+      const std::uint32_t field = get32(at + 16);
+      const char* packed = tile.data() + at + 20;
+      EXPECT_EQ(LZ4_decompress_safe(packed, reinterpret_cast<char*>(raw.data()), int(field), int(raw_n / 2)),
+                int(raw_n / 2));
+      EXPECT_EQ(LZ4_decompress_safe(packed + field, reinterpret_cast<char*>(raw.data() + raw_n / 2),
+                                    int(stored_n - 4 - field), int(raw_n / 2)),
+                int(raw_n / 2));
+    } else {
+      EXPECT_EQ(LZ4_decompress_safe(tile.data() + at + 16, reinterpret_cast<char*>(raw.data()), int(stored_n), int(raw_n)),
+                int(raw_n));
+    }
     if (get32(8) >= 6) raw = planes_by_hand(raw, false);
     out.push_back(std::move(raw));
     at += 16 + stored_n;
@@ -680,7 +709,7 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
     joined.insert(joined.end(), chunks[i].begin(), chunks[i].end());
   }
   // The writer's tile is the format's description laid out here, byte for byte.
-  EXPECT_EQ(bytes, chunked_tile(6, {2, 0, 2}, 3, std::uint32_t(tile_blocks(t).size()), chunks));
+  EXPECT_EQ(bytes, chunked_tile(7, {2, 0, 2}, 3, std::uint32_t(tile_blocks(t).size()), chunks));
   // Joined, the chunks are format 4's raw payload, byte for byte.
   const std::vector<char> v4 = legacy_tile(4, {2, 0, 2}, t);
   std::vector<unsigned char> v4_raw(joined.size());
@@ -717,7 +746,7 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
                                                    std::vector<unsigned char>(joined.begin() + at, joined.begin() + tail),
                                                    std::vector<unsigned char>(joined.begin() + tail, joined.end())};
   };
-  write_bytes(dir / "recut.tile", chunked_tile(6, {2, 0, 2}, 3, blocks, cut(two)));
+  write_bytes(dir / "recut.tile", chunked_tile(7, {2, 0, 2}, 3, blocks, cut(two)));
   VoxelTable recut_back(3);
   read_tile(dir / "recut.tile", recut_back);
   EXPECT_EQ(recut_back.live_count(), t.live_count());
@@ -737,19 +766,19 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
     read_tile(dir / "odd6.tile", fresh);
   }, "odd6.tile", "chunk 0 of " + std::to_string(two - 7) + " raw bytes, not whole 16-byte units");
   // Block counts against the header: one more, one fewer.
-  write_bytes(dir / "more.tile", chunked_tile(6, {2, 0, 2}, 3, blocks + 1, chunks));
+  write_bytes(dir / "more.tile", chunked_tile(7, {2, 0, 2}, 3, blocks + 1, chunks));
   expect_input_error([&] {
     VoxelTable fresh(3);
     read_tile(dir / "more.tile", fresh);
   }, "more.tile", std::to_string(blocks) + " blocks, header says " + std::to_string(blocks + 1));
   // A count no payload could hold: the reader sizes its index by the bytes it has decompressed (a
   // block takes at least 16), not by the count, which would ask for 128 GiB.
-  write_bytes(dir / "lying.tile", chunked_tile(6, {2, 0, 2}, 3, 0xffffffffu, chunks));
+  write_bytes(dir / "lying.tile", chunked_tile(7, {2, 0, 2}, 3, 0xffffffffu, chunks));
   expect_input_error([&] {
     VoxelTable fresh(3);
     read_tile(dir / "lying.tile", fresh);
   }, "lying.tile", std::to_string(blocks) + " blocks, header says 4294967295");
-  write_bytes(dir / "fewer.tile", chunked_tile(6, {2, 0, 2}, 3, blocks - 1, chunks));
+  write_bytes(dir / "fewer.tile", chunked_tile(7, {2, 0, 2}, 3, blocks - 1, chunks));
   VoxelTable fewer_back(3);
   expect_input_error([&] { read_tile(dir / "fewer.tile", fewer_back); }, "fewer.tile",
                      "more blocks than the header's " + std::to_string(blocks - 1));
@@ -763,8 +792,45 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
     expect_input_error([&] { read_tile(dir / "flipped.tile", fresh); }, "flipped.tile", "damaged tile: payload checksum mismatch");
     EXPECT_EQ(fresh.block_count(), 0u) << "the chunks before the damaged one are dropped again";
   }
+  // Format 7's first half claiming none, or all, of the chunk's stored bytes (the chunk and header
+  // checksums made to match) is damage; so is one that decompresses to other than half the planes.
+  const std::uint32_t first_blocks = std::uint32_t(std::upper_bound(ends.begin(), ends.end(), chunks[0].size()) - ends.begin());
+  const std::vector<char> halves = chunked_tile(7, {2, 0, 2}, 3, first_blocks, {chunks[0]});
+  auto with_first_half = [&](std::uint32_t field) {
+    std::vector<unsigned char> stored(halves.begin() + 64, halves.end());
+    for (int i = 0; i < 4; ++i) stored[16 + i] = static_cast<unsigned char>(field >> (8 * i));
+    const std::uint64_t chunk_hash = XXH3_64bits(stored.data() + 16, stored.size() - 16);
+    for (int i = 0; i < 8; ++i) stored[8 + i] = static_cast<unsigned char>(chunk_hash >> (8 * i));
+    return tile_bytes(7, {2, 0, 2}, 3, first_blocks, chunks[0].size(), stored, XXH3_64bits(stored.data(), 16));
+  };
+  const std::uint32_t stored_n = std::uint32_t(halves.size() - 64 - 16);
+  const std::uint32_t field = std::uint32_t(static_cast<unsigned char>(halves[80])) |
+                              std::uint32_t(static_cast<unsigned char>(halves[81])) << 8 |
+                              std::uint32_t(static_cast<unsigned char>(halves[82])) << 16 |
+                              std::uint32_t(static_cast<unsigned char>(halves[83])) << 24;
+  ASSERT_GT(field, 0u);
+  ASSERT_LT(field, stored_n - 4);
+  write_bytes(dir / "halves_ok.tile", with_first_half(field));
+  VoxelTable halves_back(3);
+  read_tile(dir / "halves_ok.tile", halves_back);  // the first chunk's blocks, as a tile of their own
+  const std::size_t first_records = (chunks[0].size() - 16 * first_blocks) / 16;
+  EXPECT_GT(halves_back.live_count(), first_records - 8) << "all but the sample's few erased voxels are live";
+  EXPECT_LE(halves_back.live_count(), first_records);
+  for (std::uint32_t lie : {0u, stored_n - 4, 0xffffffffu}) {
+    write_bytes(dir / "halves.tile", with_first_half(lie));
+    VoxelTable fresh(3);
+    expect_input_error([&] { read_tile(dir / "halves.tile", fresh); }, "halves.tile",
+                       "chunk 0's halves do not fit its " + std::to_string(stored_n) + " stored bytes");
+    EXPECT_EQ(fresh.block_count(), 0u);
+  }
+  for (std::uint32_t lie : {field - 1, field + 1}) {
+    write_bytes(dir / "halves.tile", with_first_half(lie));
+    VoxelTable fresh(3);
+    expect_input_error([&] { read_tile(dir / "halves.tile", fresh); }, "halves.tile",
+                       "chunk 0 does not decompress to its stated size");
+  }
   // A chunk of more than 1 MiB is refused before anything is allocated for it.
-  write_bytes(dir / "huge.tile", chunked_tile(6, {2, 0, 2}, 3, blocks, {joined}));
+  write_bytes(dir / "huge.tile", chunked_tile(7, {2, 0, 2}, 3, blocks, {joined}));
   expect_input_error([&] {
     VoxelTable fresh(3);
     read_tile(dir / "huge.tile", fresh);
