@@ -1408,6 +1408,11 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
           for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
           bounds.set_row(cp, row_value);
+          Vector3d base;  // the column's centre at ia = 0
+          base[ax] = root.min[ax];
+          base[bx] = root.min[bx] + h * double(ib);
+          double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
+          camera_terms(R, base, bx, terms);
           // The item's candidates go through the kernel in phases, each a loop over all of them:
           // projection (row by row, here), owner, sample, voxel, write. A candidate's work is one
           // long chain of dependent steps (a division, a floor, the quad, the shape, the owner's
@@ -1418,10 +1423,6 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           // gets the same arithmetic either way, and at most one contribution per depth map, so
           // the field is the same.
           for (std::int64_t ic = ic0; ic <= ic1; ++ic) {
-            Vector3d base;
-            base[ax] = root.min[ax];
-            base[bx] = root.min[bx] + h * double(ib);
-            base[cx] = root.min[cx] + h * double(ic);
             bool empty = false;
             for (int j = 0; j < n_parallel && !empty; ++j)
               empty = row_value[parallel[j]] + double(ic) * cp[parallel[j]].vc < 0;
@@ -1433,10 +1434,9 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
             tmax = std::min(tmax, double(a1 + 1));
             const std::int64_t i0 = std::max<std::int64_t>(a0, -fast_floor(-tmin));  // ceil
             const std::int64_t i1 = std::min<std::int64_t>(a1, fast_floor(tmax));
-            double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
-            camera_terms(R, base, bx, terms);
-            camera_terms(R, base, cx, terms);
             if (i1 < i0) continue;
+            base[cx] = root.min[cx] + h * double(ic);
+            camera_terms(R, base, cx, terms);
             // Room for every voxel of the column and one more (project_column_pairs).
             if (n + std::size_t(i1 - i0 + 2) > batch.capacity) batch.grow(n + std::size_t(i1 - i0 + 2), n);
             // Phase 1: project; mark the voxels whose quad is this tile's.
@@ -1484,7 +1484,15 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               const double diagonal = first.edge_local(here.split & 3, U, V);
               const int slot = (diagonal >= 0) == bool(here.split & Quad::kPositive) ? 0 : 1;
               const Ownership& s = shapes.shape[here.shape[slot] & 63];
+#if defined(__SSE2__) && defined(__x86_64__)
+              // Edges 0 and 1 in two lanes (the same products and differences, so the same bits).
+              const __m128d dv = _mm_sub_pd(_mm_set1_pd(V), _mm_loadu_pd(s.ay));
+              const __m128d du = _mm_sub_pd(_mm_set1_pd(U), _mm_loadu_pd(s.ax));
+              _mm_storeu_pd(cand.E, _mm_sub_pd(_mm_mul_pd(_mm_loadu_pd(s.dx), dv), _mm_mul_pd(_mm_loadu_pd(s.dy), du)));
+              cand.E[2] = s.edge_local(2, U, V);
+#else
               for (int e = 0; e < 3; ++e) cand.E[e] = s.edge_local(e, U, V);
+#endif
               cand.owner = here.tri[slot];
               cand.shape = &s;
             } else if (!try_quad(0, 0, (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0)) {
