@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """How full a job's voxel blocks are, per level: the evidence for (or against) a smaller block
-shape. Reads the job's checkpoint tiles (formats 4 to 6, through bench/field_hash.py's reader) and
+shape. Reads the job's checkpoint tiles (formats 4 to 7, through bench/field_hash.py's reader) and
 its brick level (job.sqlite), and prints per level: blocks, block edge, present voxels, the share
 of a block's slots they fill, and for 4^3 blocks how many of their eight 2^3 octants hold a
 present voxel and how full those are; then the slots (16 bytes each, all zeroed when a block is
@@ -13,7 +13,7 @@ import sqlite3
 import struct
 import sys
 
-from field_hash import raw_payload  # the tile reader (formats 4 to 6)
+from field_hash import raw_payload  # the tile reader (formats 4 to 7)
 
 if len(sys.argv) != 2:
     sys.exit(__doc__)

@@ -1,5 +1,5 @@
 #pragma once
-// Byte planes of 16-byte units: the transform a format-6 tile applies to each chunk before LZ4.
+// Byte planes of 16-byte units: the transform tiles apply to each chunk before LZ4 (formats 6 on).
 //
 // A tile's raw payload is a sequence of 16-byte units (a block's key and mask, then its voxels'
 // records). Neighbouring voxels have close distances and weights, so the high bytes of their

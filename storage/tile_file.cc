@@ -77,9 +77,6 @@ bool smaller(const TileBuffers::Mapping& m, std::size_t capacity) { return m.cap
 
 constexpr char kMagic[8] = {'S', 'F', 'T', 'I', 'L', 'E', '1', '\n'};
 constexpr std::size_t kHeaderBytes = 64;  // 56 bytes of fields + their checksum
-// LZ4's acceleration (formats 5 and 6; format 7's, below, per half of the planes): on the
-// present voxels of igea's field, 4 compressed 1.8x faster than 1 for 2.5 % more bytes (a
-// checkpoint compresses the whole field; bench/README.md, session 31).
 // Bytes of one voxel in a tile: formats 3 and 4 store VoxelData's 16 bytes (two float32, four
 // u16); formats 1 and 2 stored six float32 (colour and colour weight as floats).
 constexpr std::size_t record_bytes(std::uint32_t version) { return version >= 3 ? 16 : 24; }
@@ -103,7 +100,9 @@ constexpr bool stores_planes(std::uint32_t version) { return version >= 6; }
 // field's (planes 0-7, the bytes of distance and weight) at acceleration 4, and the colour's
 // (planes 8-15: colour and colour share) at 16. The colour's planes compressed worst (0.6-0.75 of
 // their size on igea) for most of LZ4's time; at 16 igea's checkpoint compresses in 0.72 of the
-// time for 4.4 % more bytes (bench/README.md, session 45).
+// time for 4.4 % more bytes (bench/README.md, session 45). Acceleration 4 was chosen for formats 5
+// and 6: on the present voxels of igea's field it compressed 1.8x faster than 1 for 2.5 % more
+// bytes (a checkpoint compresses the whole field; bench/README.md, session 31).
 constexpr bool stores_plane_halves(std::uint32_t version) { return version >= 7; }
 constexpr int kFieldAcceleration = 4, kColourAcceleration = 16;
 // The most a chunk of `raw_n` raw bytes may store (LZ4's bound on its block or blocks).
@@ -402,7 +401,7 @@ std::uint64_t write_tile(const std::filesystem::path& path, BrickCoord coord, co
         for (int o = 0; o < 8; ++o) {
           if (const VoxelData* v = ahead.part[o].load(std::memory_order_relaxed)) {
             __builtin_prefetch(v);
-            __builtin_prefetch(v + 4);
+            __builtin_prefetch(reinterpret_cast<const char*>(v) + 64);  // a 1-voxel block's arena line ends there
           }
         }
       }
@@ -693,7 +692,8 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
         if (stores_plane_halves(version)) {
           // Two LZ4 blocks, each half of the planes, behind the first's stored size.
           const std::uint32_t field = stored_n >= 4 ? get32(s + kChunkHeader) : 0;
-          if (stored_n < 4 || field == 0 || field >= stored_n - 4)
+          const std::uint32_t half_bound = std::uint32_t(LZ4_compressBound(int(raw_n / 2)));
+          if (stored_n < 4 || field == 0 || field >= stored_n - 4 || field > half_bound || stored_n - 4 - field > half_bound)
             throw bad(which + "'s halves do not fit its " + std::to_string(stored_n) + " stored bytes");
           const char* packed = reinterpret_cast<const char*>(s + kChunkHeader + 4);
           const int half = int(raw_n / 2);

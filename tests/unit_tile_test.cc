@@ -213,8 +213,8 @@ TEST(Tile, EveryFlippedByteIsDetectedAndNamesTheTile) {
 namespace {
 
 // A tile of format 1 or 2 (24-byte voxels: six float32), 3 (every voxel of a block in 16 bytes),
-// 4 (a presence mask per block, the present voxels in 16 bytes; one LZ4 block) or 5 and 6 (the same
-// raw payload in a chunk; 6 compresses its byte planes), laid out here from
+// 4 (a presence mask per block, the present voxels in 16 bytes; one LZ4 block) or 5 to 7 (the same
+// raw payload in a chunk; 6 compresses its byte planes, 7 their halves apart), laid out here from
 // the format's description rather than by this build's writer, which writes only the current format. With `colour`, every voxel's record of format 1-2 carries that float
 // colour and colour weight instead of its own.
 std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
@@ -400,7 +400,7 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   // Format 6 is format 7's planes as one LZ4 block.
   const std::vector<char> v6 = legacy_tile(6, {2, 0, 2}, t);
   EXPECT_EQ(raw_size(v6), raw_size(bytes));
-  EXPECT_NE(v6, bytes);
+  EXPECT_NE(std::vector<char>(v6.begin() + 64, v6.end()), std::vector<char>(bytes.begin() + 64, bytes.end()));
   write_bytes(dir / "v6.tile", v6);
   for (const char* name : {"v1.tile", "v2.tile", "v3.tile", "v4.tile", "v5.tile", "v6.tile", "v7.tile"}) {
     SCOPED_TRACE(name);
@@ -644,8 +644,8 @@ TEST(Tile, ReusedBuffersChangeNoByteOfATile) {
 
 namespace {
 
-// The raw chunks of a format-5 or 6 tile's bytes (each decompressed; a format-6 chunk's planes
-// put back into units).
+// The raw chunks of a tile's bytes of format 5 to 7 (each decompressed; the planes of a chunk of
+// format 6 or 7 put back into units).
 std::vector<std::vector<unsigned char>> raw_chunks(const std::vector<char>& tile) {
   auto get32 = [&](std::size_t at) {
     std::uint32_t v = 0;
@@ -823,6 +823,30 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
                        "chunk 0's halves do not fit its " + std::to_string(stored_n) + " stored bytes");
     EXPECT_EQ(fresh.block_count(), 0u);
   }
+  // A chunk's stored bytes short of the first half's size, or a half beyond LZ4's bound on half
+  // the raw bytes (the total within the bound on both), are damage too.
+  auto with_stored = [&](std::vector<unsigned char> packed, std::size_t raw_n) {
+    std::vector<unsigned char> stored(16);
+    for (int i = 0; i < 4; ++i) stored[i] = static_cast<unsigned char>(raw_n >> (8 * i));
+    for (int i = 0; i < 4; ++i) stored[4 + i] = static_cast<unsigned char>(packed.size() >> (8 * i));
+    const std::uint64_t chunk_hash = XXH3_64bits(packed.data(), packed.size());
+    for (int i = 0; i < 8; ++i) stored[8 + i] = static_cast<unsigned char>(chunk_hash >> (8 * i));
+    stored.insert(stored.end(), packed.begin(), packed.end());
+    return tile_bytes(7, {2, 0, 2}, 3, first_blocks, raw_n, stored, XXH3_64bits(stored.data(), 16));
+  };
+  write_bytes(dir / "halves.tile", with_stored({1, 0, 0}, 256));  // raw bytes the header finds plausible
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "halves.tile", fresh);
+  }, "halves.tile", "chunk 0's halves do not fit its 3 stored bytes");
+  const std::uint32_t half_bound = std::uint32_t(LZ4_compressBound(int(chunks[0].size() / 2)));
+  std::vector<unsigned char> lopsided(4 + half_bound + 8, 0);
+  for (int i = 0; i < 4; ++i) lopsided[i] = static_cast<unsigned char>((half_bound + 1) >> (8 * i));
+  write_bytes(dir / "halves.tile", with_stored(lopsided, chunks[0].size()));
+  expect_input_error([&] {
+    VoxelTable fresh(3);
+    read_tile(dir / "halves.tile", fresh);
+  }, "halves.tile", "chunk 0's halves do not fit its " + std::to_string(lopsided.size()) + " stored bytes");
   for (std::uint32_t lie : {field - 1, field + 1}) {
     write_bytes(dir / "halves.tile", with_first_half(lie));
     VoxelTable fresh(3);
