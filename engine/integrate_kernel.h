@@ -66,6 +66,18 @@ struct Ownership {
   // (multiples of p's ulp, below 2 in size), so this gives the bits of the moved triangle's own
   // edge(), and one Ownership serves every quad of its shape.
   double edge_local(int e, double U, double V) const { return dx[e] * (V - ay[e]) - dy[e] * (U - ax[e]); }
+  // All three edge_local() values; edges 0 and 1 in two lanes where there are SSE2 lanes (the same
+  // products and differences, so the same bits).
+  void edges_local(double U, double V, double E[3]) const {
+#if defined(__SSE2__) && defined(__x86_64__)
+    const __m128d dv = _mm_sub_pd(_mm_set1_pd(V), _mm_loadu_pd(ay));
+    const __m128d du = _mm_sub_pd(_mm_set1_pd(U), _mm_loadu_pd(ax));
+    _mm_storeu_pd(E, _mm_sub_pd(_mm_mul_pd(_mm_loadu_pd(dx), dv), _mm_mul_pd(_mm_loadu_pd(dy), du)));
+    E[2] = edge_local(2, U, V);
+#else
+    for (int e = 0; e < 3; ++e) E[e] = edge_local(e, U, V);
+#endif
+  }
   // Sets the fields; false if the triangle is degenerate in the sensor plane.
   bool init(const Eigen::Vector2f q[3], const std::uint32_t idx[3]) {
     for (int e = 0; e < 3; ++e) {  // edge e is opposite vertex e

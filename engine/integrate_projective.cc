@@ -1484,15 +1484,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
               const double diagonal = first.edge_local(here.split & 3, U, V);
               const int slot = (diagonal >= 0) == bool(here.split & Quad::kPositive) ? 0 : 1;
               const Ownership& s = shapes.shape[here.shape[slot] & 63];
-#if defined(__SSE2__) && defined(__x86_64__)
-              // Edges 0 and 1 in two lanes (the same products and differences, so the same bits).
-              const __m128d dv = _mm_sub_pd(_mm_set1_pd(V), _mm_loadu_pd(s.ay));
-              const __m128d du = _mm_sub_pd(_mm_set1_pd(U), _mm_loadu_pd(s.ax));
-              _mm_storeu_pd(cand.E, _mm_sub_pd(_mm_mul_pd(_mm_loadu_pd(s.dx), dv), _mm_mul_pd(_mm_loadu_pd(s.dy), du)));
-              cand.E[2] = s.edge_local(2, U, V);
-#else
-              for (int e = 0; e < 3; ++e) cand.E[e] = s.edge_local(e, U, V);
-#endif
+              s.edges_local(U, V, cand.E);
               cand.owner = here.tri[slot];
               cand.shape = &s;
             } else if (!try_quad(0, 0, (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0)) {
