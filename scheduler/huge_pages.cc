@@ -1,11 +1,13 @@
 #include "scheduler/huge_pages.h"
 
 #include <gnu/libc-version.h>
+#include <sys/prctl.h>
 #include <unistd.h>
 
 #include <charconv>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 
 namespace sf {
@@ -32,12 +34,31 @@ bool has_hugetlb_tunable(std::string_view version) {
   return major > 2 || (major == 2 && minor >= 35);
 }
 
+bool gives_huge_pages(std::string_view transparent_hugepage) {
+  return transparent_hugepage.find("[madvise]") != std::string_view::npos ||
+         transparent_hugepage.find("[always]") != std::string_view::npos;
+}
+
+// Whether any virtio-balloon device of this machine reports free pages to its host.
+bool balloon_reports_free_pages() {
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator("/sys/bus/virtio/drivers/virtio_balloon", ec)) {
+    std::ifstream in(entry.path() / "features");
+    std::string features;
+    if (in && std::getline(in, features) && reports_free_pages(features)) return true;
+  }
+  return false;
+}
+
 }  // namespace
 
+bool reports_free_pages(std::string_view balloon_features) {
+  return balloon_features.size() > 5 && balloon_features[5] == '1';
+}
+
 std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
-                                              std::string_view libc_version) {
-  const bool huge = transparent_hugepage.find("[madvise]") != std::string_view::npos ||
-                    transparent_hugepage.find("[always]") != std::string_view::npos;
+                                              std::string_view libc_version, bool host_reports_free_pages) {
+  const bool huge = gives_huge_pages(transparent_hugepage);
   if (!huge && transparent_hugepage.find("[never]") == std::string_view::npos) return std::nullopt;
   if (!has_hugetlb_tunable(libc_version)) return std::nullopt;
   const std::string_view current = tunables ? tunables : "";
@@ -52,7 +73,9 @@ std::optional<std::string> huge_page_tunables(const char* tunables, std::string_
   } else {
     if (!value.empty()) value += ':';
     value += kTunable;
-    value += huge ? "=1" : "=0";  // 0: nothing to ask for, but it marks the re-execution as done
+    // 0 where there is nothing to ask for (it still marks the re-execution as done) or where
+    // fresh huge pages are the host's to back anew (huge_pages.h).
+    value += huge && !host_reports_free_pages ? "=1" : "=0";
   }
   for (const auto& [name, setting] : kHeapTunables) {
     if (current.find(name) != std::string_view::npos) continue;  // the user's
@@ -71,12 +94,21 @@ void reexec_with_huge_pages(char** argv) {
   std::string mode;  // one line
   if (!std::getline(in, mode)) return;
   const char* before = std::getenv("GLIBC_TUNABLES");
-  const std::optional<std::string> value = huge_page_tunables(before, mode, gnu_get_libc_version());
+  const bool reporting = balloon_reports_free_pages();
+  const std::optional<std::string> value = huge_page_tunables(before, mode, gnu_get_libc_version(), reporting);
   if (!value) return;
+  // Under `always` the kernel gives huge pages unasked; hugetlb=0 alone would not stop it.
+  const bool user_chose = before && std::string_view(before).find(kTunable) != std::string_view::npos;
+  const bool thp_disabled = reporting && !user_chose && mode.find("[always]") != std::string::npos &&
+                            ::prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0) == 0;
   const std::string saved = before ? before : "";
-  if (setenv("GLIBC_TUNABLES", value->c_str(), 1) != 0) return;
+  if (setenv("GLIBC_TUNABLES", value->c_str(), 1) != 0) {
+    if (thp_disabled) ::prctl(PR_SET_THP_DISABLE, 0, 0, 0, 0);
+    return;
+  }
   execv("/proc/self/exe", argv);
   // Still here: the exec failed; carry on as started.
+  if (thp_disabled) ::prctl(PR_SET_THP_DISABLE, 0, 0, 0, 0);
   if (before)
     setenv("GLIBC_TUNABLES", saved.c_str(), 1);
   else

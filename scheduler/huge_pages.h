@@ -1,10 +1,13 @@
 #pragma once
-// Transparent huge pages for the heap. On this project's machines a first touch of a fresh 4 KiB
-// page costs ~10 µs (a virtual machine's page fault), and a fusion job touches its voxel blocks,
+// The heap's page size and growth. On the machines of sessions 19-37 a first touch of a fresh 4
+// KiB page cost ~10 µs (a virtual machine's page fault), and a fusion job touches its voxel blocks,
 // tile images and per-depth-map tables afresh many times over: a third of an integration's time
 // went to page faults (bench/README.md, session 19). glibc's malloc asks the kernel for 2 MiB pages
 // when started with GLIBC_TUNABLES=glibc.malloc.hugetlb=1, a setting read only at start-up, so the
 // command-line program re-executes itself once with it. Allocation only: results do not change.
+// Where the host takes free 2 MiB blocks back (a balloon that reports free pages, as on the
+// machines since session 39) fresh huge pages are the slow ones, and it asks for 4 KiB pages
+// instead (huge_page_tunables).
 //
 // That alone gives 2 MiB pages to the main thread's heap only. TBB's worker threads allocate from
 // heaps of their own, which glibc grows by as little as each request needs, so a 2 MiB range is
@@ -31,12 +34,27 @@ namespace sf {
 // kept: glibc.malloc.hugetlb set there is the user's choice (0 on a virtual machine whose host
 // backs fresh 2 MiB pages slowly: bench/README.md, session 39), and the heap tunables it lacks are
 // still added; nullopt once hugetlb and all three are set, as in the re-executed process itself.
+// `host_reports_free_pages` (reports_free_pages below) asks for 4 KiB pages (hugetlb=0) in every
+// mode: on a virtual machine whose balloon hands free 2 MiB blocks back to the host, huge pages are
+// made of exactly those blocks, so a fresh one is backed anew by the host (0.37-0.57 GB/s for 128
+// MiB after a few seconds idle), while 4 KiB pages mostly come from memory the guest still holds
+// (~1-3 GB/s): igea's integration at 1 thread took 0.85x the time on 4 KiB pages, idle or run
+// back to back (bench/README.md, session 46). The city block's eighth, whose field reuses its
+// memory as bricks spill and reload, took 1.02-1.07x (sessions 42, 46); set
+// GLIBC_TUNABLES=glibc.malloc.hugetlb=1 for jobs of many GB there. A hugetlb the user set is kept.
 std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
-                                              std::string_view libc_version);
+                                              std::string_view libc_version, bool host_reports_free_pages);
+
+// Whether a virtio-balloon device's feature bits (the text of
+// /sys/bus/virtio/drivers/virtio_balloon/*/features, bit 0 first) include free page reporting
+// (VIRTIO_BALLOON_F_REPORTING, bit 5).
+bool reports_free_pages(std::string_view balloon_features);
 
 // Re-executes the running program (/proc/self/exe, same arguments and environment) with the
-// tunables of huge_page_tunables(), unless SCALEFUSE_HUGE_PAGES=0. Returns if it does not (not
-// applicable, disabled, or the exec failed: the run then goes on with 4 KiB pages).
+// tunables of huge_page_tunables(), unless SCALEFUSE_HUGE_PAGES=0. Where the balloon reports free
+// pages and the kernel gives huge pages unasked (`always`), it also turns them off for the process
+// (PR_SET_THP_DISABLE, kept across the exec), unless the user set glibc.malloc.hugetlb. Returns if it does not re-execute (not applicable,
+// disabled, or the exec failed: the run then goes on with the pages it started with).
 void reexec_with_huge_pages(char** argv);
 
 }  // namespace sf
