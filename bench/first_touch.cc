@@ -1,9 +1,12 @@
 // How fast this machine hands out fresh memory: the first touch of anonymous pages, 4 KiB pages
 // against transparent huge pages (madvise), three rounds each in one process (a round maps, touches
-// one byte per 4 KiB, then unmaps). Decides whether `GLIBC_TUNABLES=glibc.malloc.hugetlb=0` suits
-// a machine (docs/architecture.md, memory budget): on a virtual machine whose host takes freed
-// guest memory back, the first round of huge pages runs at a fraction of the 4 KiB rate, and a
-// fusion job's field is all first rounds; later rounds reuse the pages the process just freed.
+// one byte per 4 KiB, then unmaps). Tells whether the program's choice of 4 KiB pages where the
+// virtio balloon reports free pages suits a machine, or `GLIBC_TUNABLES=glibc.malloc.hugetlb=1`
+// should override it (docs/architecture.md, memory budget): on a virtual machine whose host takes
+// freed guest memory back, the first round of huge pages runs at a fraction of the 4 KiB rate
+// (run it after a few seconds idle, and with 128 MiB or more: the guest keeps a few 2 MiB blocks
+// backed), and a fusion job's field is all first rounds; later rounds reuse the pages the process
+// just freed.
 // Build and run: g++ -O2 -o /tmp/first_touch bench/first_touch.cc && /tmp/first_touch [MiB=256]
 #include <sys/mman.h>
 

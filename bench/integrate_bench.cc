@@ -51,7 +51,7 @@ static DepthFrame sphere_view(double angle) {
 }
 
 int main(int argc, char** argv) {
-  sf::reexec_with_huge_pages(argv);  // measure with the heap the command-line program has
+  sf::reexec_with_heap_tunables(argv);  // measure with the heap the command-line program has
   const int frames = argc > 1 ? std::atoi(argv[1]) : 8;
   IntegrateOptions opt;
   if (argc > 2) opt.gamma = std::atof(argv[2]);

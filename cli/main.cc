@@ -11,7 +11,7 @@
 #include "scheduler/huge_pages.h"
 
 int main(int argc, char** argv) {
-  sf::reexec_with_huge_pages(argv);  // returns unless it re-executes (scheduler/huge_pages.h)
+  sf::reexec_with_heap_tunables(argv);  // returns unless it re-executes (scheduler/huge_pages.h)
   CLI::App app{"scalefuse: fusion of depth maps with multiple scales (Fuhrmann & Goesele 2011)"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "scalefuse 0.1.0");

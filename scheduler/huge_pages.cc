@@ -40,20 +40,42 @@ bool gives_huge_pages(std::string_view transparent_hugepage) {
 }
 
 // Whether any virtio-balloon device of this machine reports free pages to its host.
+// It runs before main's try block: the iteration uses error codes throughout (a range-for's
+// increment would throw).
 bool balloon_reports_free_pages() {
   std::error_code ec;
-  for (const auto& entry : std::filesystem::directory_iterator("/sys/bus/virtio/drivers/virtio_balloon", ec)) {
-    std::ifstream in(entry.path() / "features");
+  std::filesystem::directory_iterator it("/sys/bus/virtio/drivers/virtio_balloon", ec), end;
+  for (; !ec && it != end; it.increment(ec)) {
+    std::ifstream in(it->path() / "features");
     std::string features;
     if (in && std::getline(in, features) && reports_free_pages(features)) return true;
   }
   return false;
 }
 
+// The value of glibc.malloc.hugetlb the user set in `tunables`, or nullopt.
+std::optional<std::string_view> users_hugetlb(const char* tunables) {
+  if (!tunables) return std::nullopt;
+  const std::string_view t(tunables);
+  const std::size_t at = t.find(kTunable);
+  if (at == std::string_view::npos) return std::nullopt;
+  std::string_view v = t.substr(at + kTunable.size());
+  if (v.empty() || v.front() != '=') return std::string_view{};
+  v.remove_prefix(1);
+  return v.substr(0, v.find(':'));
+}
+
 }  // namespace
 
 bool reports_free_pages(std::string_view balloon_features) {
   return balloon_features.size() > 5 && balloon_features[5] == '1';
+}
+
+bool disables_transparent_huge_pages(const char* tunables, std::string_view transparent_hugepage,
+                                     bool host_reports_free_pages) {
+  if (transparent_hugepage.find("[always]") == std::string_view::npos) return false;
+  const std::optional<std::string_view> user = users_hugetlb(tunables);
+  return user ? *user == "0" : host_reports_free_pages;
 }
 
 std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
@@ -64,9 +86,9 @@ std::optional<std::string> huge_page_tunables(const char* tunables, std::string_
   const std::string_view current = tunables ? tunables : "";
   std::string value(current);
   if (current.find(kTunable) != std::string_view::npos) {
-    // The user's choice (hugetlb=0 where fresh 2 MiB pages cost more than they save, as on a
-    // virtual machine whose host takes freed memory back: bench/README.md, session 39), or this
-    // process's own re-execution: the heap tunables still apply, unless they are all set already.
+    // The user's choice (hugetlb=1 for a job of many GB on a machine whose balloon reports free
+    // pages, huge_pages.h), or this process's own re-execution: the heap tunables still apply,
+    // unless they are all set already.
     bool all = true;
     for (const auto& [name, setting] : kHeapTunables) all = all && current.find(name) != std::string_view::npos;
     if (all) return std::nullopt;
@@ -87,7 +109,7 @@ std::optional<std::string> huge_page_tunables(const char* tunables, std::string_
   return value;
 }
 
-void reexec_with_huge_pages(char** argv) {
+void reexec_with_heap_tunables(char** argv) {
   const char* opt_out = std::getenv("SCALEFUSE_HUGE_PAGES");
   if (opt_out && std::strcmp(opt_out, "0") == 0) return;
   std::ifstream in("/sys/kernel/mm/transparent_hugepage/enabled");
@@ -97,22 +119,22 @@ void reexec_with_huge_pages(char** argv) {
   const bool reporting = balloon_reports_free_pages();
   const std::optional<std::string> value = huge_page_tunables(before, mode, gnu_get_libc_version(), reporting);
   if (!value) return;
-  // Under `always` the kernel gives huge pages unasked; hugetlb=0 alone would not stop it.
-  const bool user_chose = before && std::string_view(before).find(kTunable) != std::string_view::npos;
-  const bool thp_disabled = reporting && !user_chose && mode.find("[always]") != std::string::npos &&
-                            ::prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0) == 0;
   const std::string saved = before ? before : "";
-  if (setenv("GLIBC_TUNABLES", value->c_str(), 1) != 0) {
-    if (thp_disabled) ::prctl(PR_SET_THP_DISABLE, 0, 0, 0, 0);
-    return;
+  // Under `always` the kernel gives huge pages unasked: hugetlb=0 alone would not keep the heap
+  // on 4 KiB pages. Set only if not set already (by a parent), so that undoing it after a failed
+  // exec restores the start.
+  const bool thp_disabled = disables_transparent_huge_pages(before, mode, reporting) &&
+                            ::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0) == 0 &&
+                            ::prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0) == 0;
+  if (setenv("GLIBC_TUNABLES", value->c_str(), 1) == 0) {
+    execv("/proc/self/exe", argv);
+    // Still here: the exec failed; carry on as started.
+    if (before)
+      setenv("GLIBC_TUNABLES", saved.c_str(), 1);
+    else
+      unsetenv("GLIBC_TUNABLES");
   }
-  execv("/proc/self/exe", argv);
-  // Still here: the exec failed; carry on as started.
   if (thp_disabled) ::prctl(PR_SET_THP_DISABLE, 0, 0, 0, 0);
-  if (before)
-    setenv("GLIBC_TUNABLES", saved.c_str(), 1);
-  else
-    unsetenv("GLIBC_TUNABLES");
 }
 
 }  // namespace sf

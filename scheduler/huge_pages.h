@@ -5,9 +5,11 @@
 // went to page faults (bench/README.md, session 19). glibc's malloc asks the kernel for 2 MiB pages
 // when started with GLIBC_TUNABLES=glibc.malloc.hugetlb=1, a setting read only at start-up, so the
 // command-line program re-executes itself once with it. Allocation only: results do not change.
-// Where the host takes free 2 MiB blocks back (a balloon that reports free pages, as on the
-// machines since session 39) fresh huge pages are the slow ones, and it asks for 4 KiB pages
-// instead (huge_page_tunables).
+// Where the host takes free 2 MiB blocks back (a virtio balloon that reports free pages) it asks
+// for 4 KiB pages instead (huge_page_tunables): there fresh huge pages are the slow ones on the
+// machines since session 39. The machines of sessions 19-37 reported free pages too, but their 4
+// KiB faults cost ~10 µs each and huge pages won there; on such a machine set
+// GLIBC_TUNABLES=glibc.malloc.hugetlb=1 (bench/first_touch.cc tells which kind one is on).
 //
 // That alone gives 2 MiB pages to the main thread's heap only. TBB's worker threads allocate from
 // heaps of their own, which glibc grows by as little as each request needs, so a 2 MiB range is
@@ -31,17 +33,15 @@ namespace sf {
 // threads took 67 k faults without them, 10 k with; "never" gives none, so hugetlb=0 there, but
 // the heap tunables still spare faults: 104 k -> 77 k), `libc_version` glibc's (hugetlb exists
 // from 2.35), `tunables` the current GLIBC_TUNABLES (null if unset). Every tunable it sets is
-// kept: glibc.malloc.hugetlb set there is the user's choice (0 on a virtual machine whose host
-// backs fresh 2 MiB pages slowly: bench/README.md, session 39), and the heap tunables it lacks are
+// kept: glibc.malloc.hugetlb set there is the user's choice, and the heap tunables it lacks are
 // still added; nullopt once hugetlb and all three are set, as in the re-executed process itself.
 // `host_reports_free_pages` (reports_free_pages below) asks for 4 KiB pages (hugetlb=0) in every
-// mode: on a virtual machine whose balloon hands free 2 MiB blocks back to the host, huge pages are
-// made of exactly those blocks, so a fresh one is backed anew by the host (0.37-0.57 GB/s for 128
-// MiB after a few seconds idle), while 4 KiB pages mostly come from memory the guest still holds
-// (~1-3 GB/s): igea's integration at 1 thread took 0.85x the time on 4 KiB pages, idle or run
-// back to back (bench/README.md, session 46). The city block's eighth, whose field reuses its
-// memory as bricks spill and reload, took 1.02-1.07x (sessions 42, 46); set
-// GLIBC_TUNABLES=glibc.malloc.hugetlb=1 for jobs of many GB there. A hugetlb the user set is kept.
+// mode: the kernel hands free 2 MiB blocks back to the host, and huge pages are made of exactly
+// those blocks, so a fresh one is backed anew by the host, while 4 KiB pages mostly come from
+// memory the guest still holds. Measured on a whole job rather than a probe (a few of the
+// guest's free 2 MiB blocks are always still backed): igea's integration took 0.82-0.85x the
+// time on 4 KiB pages; jobs whose fields outgrow the memory the guest holds can lose (city
+// eighth 1.02-1.07x; docs/architecture.md, bench/README.md session 46).
 std::optional<std::string> huge_page_tunables(const char* tunables, std::string_view transparent_hugepage,
                                               std::string_view libc_version, bool host_reports_free_pages);
 
@@ -50,11 +50,17 @@ std::optional<std::string> huge_page_tunables(const char* tunables, std::string_
 // (VIRTIO_BALLOON_F_REPORTING, bit 5).
 bool reports_free_pages(std::string_view balloon_features);
 
+// Whether the re-execution also turns transparent huge pages off for the process
+// (PR_SET_THP_DISABLE): where the kernel gives them unasked (`always`) and the heap is to be on 4
+// KiB pages, by the user's glibc.malloc.hugetlb=0 or, where the user set none, by the balloon.
+bool disables_transparent_huge_pages(const char* tunables, std::string_view transparent_hugepage,
+                                     bool host_reports_free_pages);
+
 // Re-executes the running program (/proc/self/exe, same arguments and environment) with the
-// tunables of huge_page_tunables(), unless SCALEFUSE_HUGE_PAGES=0. Where the balloon reports free
-// pages and the kernel gives huge pages unasked (`always`), it also turns them off for the process
-// (PR_SET_THP_DISABLE, kept across the exec), unless the user set glibc.malloc.hugetlb. Returns if it does not re-execute (not applicable,
-// disabled, or the exec failed: the run then goes on with the pages it started with).
-void reexec_with_huge_pages(char** argv);
+// tunables of huge_page_tunables(), unless SCALEFUSE_HUGE_PAGES=0, and turns transparent huge
+// pages off first where disables_transparent_huge_pages says so (kept across the exec). Returns if
+// it does not re-execute (not applicable, disabled, or the exec failed: the run then goes on as
+// started).
+void reexec_with_heap_tunables(char** argv);
 
 }  // namespace sf

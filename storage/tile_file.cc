@@ -30,8 +30,11 @@ namespace sf {
 namespace {
 
 // Anonymous pages for `size` bytes. From 2 MiB on they are aligned to 2 MiB and the kernel is asked
-// for transparent huge pages: a first touch of a 4 KiB page costs ~10 µs on the virtual machines
-// measured, and these images are touched from end to end (scheduler/huge_pages.h).
+// for transparent huge pages: these images are touched from end to end, and a first touch of a 4
+// KiB page cost ~10 µs on the virtual machines of sessions 19-37 (scheduler/huge_pages.h). Where
+// the heap is kept on 4 KiB pages the advice stays: the pool reuses these mappings (igea's
+// integration without it: 1.032, noise; bench/README.md, session 46), and under THP `always` the
+// program has turned huge pages off for the whole process anyway.
 unsigned char* map_pages(std::size_t size) {
   constexpr std::size_t kHuge = std::size_t{2} << 20;
   const bool huge = size >= kHuge;
