@@ -116,7 +116,9 @@ void reexec_with_heap_tunables(char** argv) {
   std::string mode;  // one line
   if (!std::getline(in, mode)) return;
   const char* before = std::getenv("GLIBC_TUNABLES");
-  const bool reporting = balloon_reports_free_pages();
+  // The balloon matters only where the page size is still ours to choose: not in the re-executed
+  // process (its hugetlb is set), nor where the user set it.
+  const bool reporting = !users_hugetlb(before) && balloon_reports_free_pages();
   const std::optional<std::string> value = huge_page_tunables(before, mode, gnu_get_libc_version(), reporting);
   if (!value) return;
   const std::string saved = before ? before : "";
