@@ -34,9 +34,13 @@ bool has_hugetlb_tunable(std::string_view version) {
   return major > 2 || (major == 2 && minor >= 35);
 }
 
+// THP mode `always`: huge pages come unasked, whatever glibc.malloc.hugetlb says.
+bool gives_unasked(std::string_view transparent_hugepage) {
+  return transparent_hugepage.find("[always]") != std::string_view::npos;
+}
+
 bool gives_huge_pages(std::string_view transparent_hugepage) {
-  return transparent_hugepage.find("[madvise]") != std::string_view::npos ||
-         transparent_hugepage.find("[always]") != std::string_view::npos;
+  return transparent_hugepage.find("[madvise]") != std::string_view::npos || gives_unasked(transparent_hugepage);
 }
 
 // Whether any virtio-balloon device of this machine reports free pages to its host.
@@ -73,7 +77,7 @@ bool reports_free_pages(std::string_view balloon_features) {
 
 bool disables_transparent_huge_pages(const char* tunables, std::string_view transparent_hugepage,
                                      bool host_reports_free_pages) {
-  if (transparent_hugepage.find("[always]") == std::string_view::npos) return false;
+  if (!gives_unasked(transparent_hugepage)) return false;
   const std::optional<std::string_view> user = users_hugetlb(tunables);
   return user ? *user == "0" : host_reports_free_pages;
 }
@@ -85,7 +89,7 @@ std::optional<std::string> huge_page_tunables(const char* tunables, std::string_
   if (!has_hugetlb_tunable(libc_version)) return std::nullopt;
   const std::string_view current = tunables ? tunables : "";
   std::string value(current);
-  if (current.find(kTunable) != std::string_view::npos) {
+  if (users_hugetlb(tunables)) {
     // The user's choice (hugetlb=1 for a job of many GB on a machine whose balloon reports free
     // pages, huge_pages.h), or this process's own re-execution: the heap tunables still apply,
     // unless they are all set already.
@@ -117,8 +121,10 @@ void reexec_with_heap_tunables(char** argv) {
   if (!std::getline(in, mode)) return;
   const char* before = std::getenv("GLIBC_TUNABLES");
   // The balloon matters only where the page size is still ours to choose: not in the re-executed
-  // process (its hugetlb is set), nor where the user set it.
-  const bool reporting = !users_hugetlb(before) && balloon_reports_free_pages();
+  // process (its hugetlb is set), nor where the user set it, nor where the kernel offers no huge
+  // pages or glibc has no hugetlb tunable.
+  const bool reporting = !users_hugetlb(before) && gives_huge_pages(mode) &&
+                         has_hugetlb_tunable(gnu_get_libc_version()) && balloon_reports_free_pages();
   const std::optional<std::string> value = huge_page_tunables(before, mode, gnu_get_libc_version(), reporting);
   if (!value) return;
   const std::string saved = before ? before : "";

@@ -108,10 +108,13 @@ constexpr bool stores_planes(std::uint32_t version) { return version >= 6; }
 // bytes (a checkpoint compresses the whole field; bench/README.md, session 31).
 constexpr bool stores_plane_halves(std::uint32_t version) { return version >= 7; }
 constexpr int kFieldAcceleration = 4, kColourAcceleration = 16;
+constexpr int kHalfAcceleration[2] = {kFieldAcceleration, kColourAcceleration};
+// LZ4's bound on one of a format-7 chunk's two blocks.
+std::uint32_t half_bound(std::uint32_t raw_n) { return std::uint32_t(LZ4_compressBound(int(raw_n / 2))); }
 // The most a chunk of `raw_n` raw bytes may store (LZ4's bound on its block or blocks).
 std::uint64_t stored_bound(std::uint32_t version, std::uint32_t raw_n) {
   if (!stores_plane_halves(version)) return std::uint64_t(LZ4_compressBound(int(raw_n)));
-  return 4 + 2 * std::uint64_t(LZ4_compressBound(int(raw_n / 2)));
+  return 4 + 2 * std::uint64_t(half_bound(raw_n));
 }
 constexpr std::size_t kChunkRaw = std::size_t{256} << 10;  // raw bytes of the writer's chunks, at most
 constexpr std::size_t kMaxChunkRaw = std::size_t{1} << 20;  // what a reader accepts
@@ -237,16 +240,16 @@ class ChunkWriter {
     unsigned char* out = stored_.data();
     to_byte_planes(raw_.data(), used_ / kPlaneUnit, planes_.data());  // every block is whole units
     const int half = int(used_ / 2);  // whole units: planes 0-7, then 8-15
-    const int capacity = int(stored_.size() - kChunkHeader - 4);
-    char* const first = reinterpret_cast<char*>(out + kChunkHeader + 4);
-    const int field = LZ4_compress_fast(reinterpret_cast<const char*>(planes_.data()), first, half, capacity,
-                                        kFieldAcceleration);
-    const int colour = field <= 0 ? 0
-                                  : LZ4_compress_fast(reinterpret_cast<const char*>(planes_.data() + half), first + field,
-                                                      half, capacity - field, kColourAcceleration);
-    if (field <= 0 || colour <= 0) throw std::runtime_error(path_.string() + ": LZ4 compression failed");
-    put32(out + kChunkHeader, std::uint32_t(field));
-    const int packed = 4 + field + colour;
+    const int capacity = int(stored_.size() - kChunkHeader);
+    int packed = 4;  // the field's stored size, then the two blocks
+    for (int i = 0; i < 2; ++i) {
+      const int n = LZ4_compress_fast(reinterpret_cast<const char*>(planes_.data()) + i * half,
+                                      reinterpret_cast<char*>(out + kChunkHeader + packed), half, capacity - packed,
+                                      kHalfAcceleration[i]);
+      if (n <= 0) throw std::runtime_error(path_.string() + ": LZ4 compression failed");
+      if (i == 0) put32(out + kChunkHeader, std::uint32_t(n));
+      packed += n;
+    }
     put32(out, std::uint32_t(used_));
     put32(out + 4, std::uint32_t(packed));
     put64(out + 8, XXH3_64bits(out + kChunkHeader, std::size_t(packed)));
@@ -691,23 +694,30 @@ BrickCoord read_tile(const std::filesystem::path& path, VoxelTable& out, TileBuf
         left -= kChunkHeader + stored_n;
         raw_seen += raw_n;
         if (raw_seen > raw_size) throw bad("chunks hold more than the header's " + std::to_string(raw_size) + " raw bytes");
-        unsigned char* unpacked = stores_planes(version) ? planes.data() : raw.data();
+        // One LZ4 block, or from format 7 two, each half of the planes, behind the first's stored
+        // size. The stored buffer holds a whole chunk of the largest size, so the size is read
+        // before stored_n is known to cover it.
+        const unsigned char* packed = s + kChunkHeader;
+        std::uint32_t block_stored[2] = {stored_n, 0};
+        int blocks = 1;
         if (stores_plane_halves(version)) {
-          // Two LZ4 blocks, each half of the planes, behind the first's stored size.
-          const std::uint32_t field = stored_n >= 4 ? get32(s + kChunkHeader) : 0;
-          const std::uint32_t half_bound = std::uint32_t(LZ4_compressBound(int(raw_n / 2)));
-          if (stored_n < 4 || field == 0 || field >= stored_n - 4 || field > half_bound || stored_n - 4 - field > half_bound)
+          const std::uint32_t field = get32(packed);
+          if (stored_n < 4 || field == 0 || field >= stored_n - 4 || field > half_bound(raw_n) ||
+              stored_n - 4 - field > half_bound(raw_n))
             throw bad(which + "'s halves do not fit its " + std::to_string(stored_n) + " stored bytes");
-          const char* packed = reinterpret_cast<const char*>(s + kChunkHeader + 4);
-          const int half = int(raw_n / 2);
-          const int a = LZ4_decompress_safe(packed, reinterpret_cast<char*>(unpacked), int(field), half);
-          const int b = LZ4_decompress_safe(packed + field, reinterpret_cast<char*>(unpacked) + half,
-                                            int(stored_n - 4 - field), half);
-          if (a != half || b != half) throw bad(which + " does not decompress to its stated size");
-        } else {
-          const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(s + kChunkHeader),
-                                            reinterpret_cast<char*>(unpacked), int(stored_n), int(raw_n));
-          if (n < 0 || std::uint32_t(n) != raw_n) throw bad(which + " does not decompress to its stated size");
+          packed += 4;
+          block_stored[0] = field;
+          block_stored[1] = stored_n - 4 - field;
+          blocks = 2;
+        }
+        unsigned char* unpacked = stores_planes(version) ? planes.data() : raw.data();
+        const int block_raw = int(raw_n) / blocks;
+        for (int i = 0; i < blocks; ++i) {
+          const int n = LZ4_decompress_safe(reinterpret_cast<const char*>(packed), reinterpret_cast<char*>(unpacked),
+                                            int(block_stored[i]), block_raw);
+          if (n != block_raw) throw bad(which + " does not decompress to its stated size");
+          packed += block_stored[i];
+          unpacked += block_raw;
         }
         if (stores_planes(version)) from_byte_planes(planes.data(), raw_n / kPlaneUnit, raw.data());
         reserve_for(raw_n);

@@ -10,6 +10,7 @@ namespace {
 const std::string kPad = ":glibc.malloc.top_pad=33554432", kMmap = ":glibc.malloc.mmap_threshold=33554432",
                   kTrim = ":glibc.malloc.trim_threshold=67108864";
 const std::string kAll = "glibc.malloc.hugetlb=1" + kPad + kMmap + kTrim;
+const std::string kNone = "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim;
 }  // namespace
 
 TEST(HugePages, SetsTheHeapsInEveryTransparentHugePageMode) {
@@ -18,10 +19,9 @@ TEST(HugePages, SetsTheHeapsInEveryTransparentHugePageMode) {
   EXPECT_EQ(huge_page_tunables(nullptr, "[always] madvise never\n", "2.36", false), kAll);
   // None at all: nothing to ask glibc for (hugetlb=0 still marks the re-execution), but the heaps.
   EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]\n", "2.36", false),
-            "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim);
+            kNone);
   EXPECT_EQ(huge_page_tunables(nullptr, "", "2.36", false), std::nullopt);  // no mode read
-  const std::string set_already = "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim;
-  EXPECT_EQ(huge_page_tunables(set_already.c_str(), "always madvise [never]", "2.36", false), std::nullopt);
+  EXPECT_EQ(huge_page_tunables(kNone.c_str(), "always madvise [never]", "2.36", false), std::nullopt);
 }
 
 TEST(HugePages, NeedsAGlibcThatKnowsTheTunable) {
@@ -43,12 +43,11 @@ TEST(HugePages, KeepsTheUsersTunablesAndNeverLoops) {
   // hugetlb set by the user (0 = no huge pages) keeps their choice and still gets the heap
   // tunables it lacks; once all are set (the re-execution's own environment) nothing changes.
   EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0", "always [madvise] never", "2.36", false),
-            "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim);
+            kNone);
   EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0:glibc.malloc.top_pad=0", "always [madvise] never", "2.36", false),
             "glibc.malloc.hugetlb=0:glibc.malloc.top_pad=0" + kMmap + kTrim);
   EXPECT_EQ(huge_page_tunables(kAll.c_str(), "always [madvise] never", "2.36", false), std::nullopt);
-  const std::string no_huge = "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim;
-  EXPECT_EQ(huge_page_tunables(no_huge.c_str(), "always [madvise] never", "2.36", false), std::nullopt);
+  EXPECT_EQ(huge_page_tunables(kNone.c_str(), "always [madvise] never", "2.36", false), std::nullopt);
   // Whatever the start, mode and balloon, the value returned is a fixed point: a second start
   // re-executes no more, even if it reads the balloon differently.
   for (const char* start : {"", "glibc.malloc.hugetlb=0", "glibc.malloc.trim_threshold=5", "glibc.malloc.arena_max=1"})
@@ -62,15 +61,14 @@ TEST(HugePages, KeepsTheUsersTunablesAndNeverLoops) {
 }
 
 TEST(HugePages, AsksForSmallPagesWhereTheHostTakesFreedBlocksBack) {
-  const std::string small = "glibc.malloc.hugetlb=0" + kPad + kMmap + kTrim;
-  EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "2.36", true), small);
-  EXPECT_EQ(huge_page_tunables(nullptr, "[always] madvise never", "2.36", true), small);
-  EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]", "2.36", true), small);
+  EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "2.36", true), kNone);
+  EXPECT_EQ(huge_page_tunables(nullptr, "[always] madvise never", "2.36", true), kNone);
+  EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]", "2.36", true), kNone);
   EXPECT_EQ(huge_page_tunables("glibc.malloc.arena_max=2", "always [madvise] never", "2.36", true),
-            "glibc.malloc.arena_max=2:" + small);
+            "glibc.malloc.arena_max=2:" + kNone);
   // The user's hugetlb wins, and the re-execution's own environment stays a fixed point.
   EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=1", "always [madvise] never", "2.36", true), kAll);
-  EXPECT_EQ(huge_page_tunables(small.c_str(), "always [madvise] never", "2.36", true), std::nullopt);
+  EXPECT_EQ(huge_page_tunables(kNone.c_str(), "always [madvise] never", "2.36", true), std::nullopt);
   EXPECT_EQ(huge_page_tunables(kAll.c_str(), "always [madvise] never", "2.36", true), std::nullopt);
   EXPECT_EQ(huge_page_tunables(nullptr, "always [madvise] never", "2.34", true), std::nullopt);
 }

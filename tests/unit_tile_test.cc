@@ -234,6 +234,21 @@ std::vector<unsigned char> planes_by_hand(const std::vector<unsigned char>& in, 
   return out;
 }
 
+// Little-endian fields, as the tile format stores them.
+void set_le(unsigned char* p, std::uint64_t v, int n) {
+  for (int i = 0; i < n; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
+}
+void put_le(std::vector<unsigned char>& out, std::uint64_t v, int n) {
+  out.resize(out.size() + std::size_t(n));
+  set_le(out.data() + out.size() - std::size_t(n), v, n);
+}
+template <typename Byte>
+std::uint64_t get_le(const Byte* p, int n) {
+  std::uint64_t v = 0;
+  for (int i = 0; i < n; ++i) v |= std::uint64_t(static_cast<unsigned char>(p[i])) << (8 * i);
+  return v;
+}
+
 // A tile of format 5 to 7 around raw chunks given one by one (sizes, checksums all valid), laid out
 // from the format's description: each chunk behind its raw and stored sizes and the XXH3-64 of its
 // stored bytes, LZ4 (at acceleration 4) of its raw bytes (5) or of their byte planes (6), or (7)
@@ -250,27 +265,24 @@ std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const Vox
                               const FloatColour* colour = nullptr) {
   const std::vector<TileBlock> blocks = tile_blocks(t);
   std::vector<unsigned char> raw;
-  auto put = [](std::vector<unsigned char>& out, std::uint64_t v, int n) {
-    for (int i = 0; i < n; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
-  };
   auto put_float = [&](float f) {
     std::uint32_t u;
     std::memcpy(&u, &f, 4);
-    put(raw, u, 4);
+    put_le(raw, u, 4);
   };
   for (const TileBlock& b : blocks) {
-    put(raw, b.origin.bits, 8);
+    put_le(raw, b.origin.bits, 8);
     std::uint64_t mask = 0;
     for (std::size_t i = 0; i < (std::size_t{1} << (3 * b.log)); ++i) mask |= std::uint64_t(b.data[i].weight != 0) << i;
-    if (version >= 4) put(raw, mask, 8);
+    if (version >= 4) put_le(raw, mask, 8);
     for (std::size_t i = 0; i < (std::size_t{1} << (3 * b.log)); ++i) {
       const VoxelData& v = b.data[i];
       if (version >= 4 && !(mask >> i & 1)) continue;
       put_float(v.distance);
       put_float(v.weight);
       if (version >= 3) {
-        for (int c = 0; c < 3; ++c) put(raw, v.colour_fixed[c], 2);
-        put(raw, v.colour_share, 2);
+        for (int c = 0; c < 3; ++c) put_le(raw, v.colour_fixed[c], 2);
+        put_le(raw, v.colour_share, 2);
         continue;
       }
       for (int c = 0; c < 3; ++c) put_float(colour ? colour->colour[c] : v.colour(c));
@@ -281,11 +293,6 @@ std::vector<char> legacy_tile(std::uint32_t version, BrickCoord coord, const Vox
     return chunked_tile(version, coord, t.brick_level(), std::uint32_t(blocks.size()),
                         raw.empty() ? std::vector<std::vector<unsigned char>>{} : std::vector<std::vector<unsigned char>>{raw});
   return wrap_tile(version, coord, t.brick_level(), blocks.size(), raw);
-}
-
-// A tile of format `version` around the raw payload `raw` (LZ4, sizes, checksums all valid).
-void put_le(std::vector<unsigned char>& out, std::uint64_t v, int n) {
-  for (int i = 0; i < n; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
 }
 
 // A tile of format `version`: the 64-byte header (its own checksum computed here) and the stored payload.
@@ -309,6 +316,7 @@ std::vector<char> tile_bytes(std::uint32_t version, BrickCoord coord, int brick_
   return out;
 }
 
+// A tile of format 1 to 4 around the raw payload `raw` (LZ4, sizes, checksums all valid).
 std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::size_t block_count,
                             const std::vector<unsigned char>& raw) {
   std::vector<unsigned char> stored(std::size_t(LZ4_compressBound(int(raw.size()))));
@@ -319,39 +327,55 @@ std::vector<char> wrap_tile(std::uint32_t version, BrickCoord coord, int brick_l
                     tile_checksum(version, stored.data(), stored.size()));
 }
 
-std::vector<char> chunked_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::uint32_t block_count,
-                               const std::vector<std::vector<unsigned char>>& chunks) {
+// A chunked tile around chunks already packed, each given as its raw size and stored bytes: each
+// framed by its header (sizes and the XXH3-64 of the stored bytes), the payload checksum that of
+// the chunk headers. Whether the stored bytes are sound is the caller's to choose.
+struct PackedChunk {
+  std::size_t raw_n;
+  std::vector<unsigned char> stored;
+};
+std::vector<char> framed_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::uint32_t block_count,
+                              const std::vector<PackedChunk>& chunks) {
   std::vector<unsigned char> stored, chunk_headers;
   std::uint64_t raw_bytes = 0;
-  for (const auto& raw : chunks) {
-    const std::vector<unsigned char> input = version >= 6 ? planes_by_hand(raw, true) : raw;
-    auto lz4 = [](const unsigned char* data, std::size_t size, int acceleration) {
-      std::vector<char> out(static_cast<std::size_t>(LZ4_compressBound(int(size))));
-      out.resize(std::size_t(
-          LZ4_compress_fast(reinterpret_cast<const char*>(data), out.data(), int(size), int(out.size()), acceleration)));
-      return out;
-    };
-    std::vector<char> packed;
-    if (version >= 7) {
-      const std::size_t half = input.size() / 2;
-      const std::vector<char> field = lz4(input.data(), half, 4), colour = lz4(input.data() + half, half, 16);
-      for (int i = 0; i < 4; ++i) packed.push_back(static_cast<char>(field.size() >> (8 * i)));
-      packed.insert(packed.end(), field.begin(), field.end());
-      packed.insert(packed.end(), colour.begin(), colour.end());
-    } else {
-      packed = lz4(input.data(), input.size(), 4);
-    }
+  for (const auto& [raw_n, packed] : chunks) {
     std::vector<unsigned char> header;
-    put_le(header, raw.size(), 4);
+    put_le(header, raw_n, 4);
     put_le(header, packed.size(), 4);
     put_le(header, XXH3_64bits(packed.data(), packed.size()), 8);
     chunk_headers.insert(chunk_headers.end(), header.begin(), header.end());
     stored.insert(stored.end(), header.begin(), header.end());
     stored.insert(stored.end(), packed.begin(), packed.end());
-    raw_bytes += raw.size();
+    raw_bytes += raw_n;
   }
   return tile_bytes(version, coord, brick_level, block_count, raw_bytes, stored,
                     XXH3_64bits(chunk_headers.data(), chunk_headers.size()));
+}
+
+std::vector<char> chunked_tile(std::uint32_t version, BrickCoord coord, int brick_level, std::uint32_t block_count,
+                               const std::vector<std::vector<unsigned char>>& chunks) {
+  std::vector<PackedChunk> packed_chunks;
+  for (const auto& raw : chunks) {
+    const std::vector<unsigned char> input = version >= 6 ? planes_by_hand(raw, true) : raw;
+    auto lz4 = [](const unsigned char* data, std::size_t size, int acceleration) {
+      std::vector<unsigned char> out(static_cast<std::size_t>(LZ4_compressBound(int(size))));
+      out.resize(std::size_t(LZ4_compress_fast(reinterpret_cast<const char*>(data), reinterpret_cast<char*>(out.data()),
+                                               int(size), int(out.size()), acceleration)));
+      return out;
+    };
+    std::vector<unsigned char> packed;
+    if (version >= 7) {
+      const std::size_t half = input.size() / 2;
+      const std::vector<unsigned char> field = lz4(input.data(), half, 4), colour = lz4(input.data() + half, half, 16);
+      put_le(packed, field.size(), 4);
+      packed.insert(packed.end(), field.begin(), field.end());
+      packed.insert(packed.end(), colour.begin(), colour.end());
+    } else {
+      packed = lz4(input.data(), input.size(), 4);
+    }
+    packed_chunks.push_back({raw.size(), std::move(packed)});
+  }
+  return framed_tile(version, coord, brick_level, block_count, packed_chunks);
 }
 
 void write_bytes(const std::filesystem::path& p, const std::vector<char>& b) {
@@ -375,11 +399,7 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   // format 4 keeps the present voxels only, behind a u64 mask per block.
   const std::vector<char> v2 = legacy_tile(2, {2, 0, 2}, t);
   const std::vector<char> v3 = legacy_tile(3, {2, 0, 2}, t);
-  auto raw_size = [](const std::vector<char>& b) {
-    std::uint64_t v = 0;
-    for (int i = 0; i < 8; ++i) v |= std::uint64_t(static_cast<unsigned char>(b[32 + i])) << (8 * i);
-    return v;
-  };
+  auto raw_size = [](const std::vector<char>& b) { return get_le(b.data() + 32, 8); };
   const std::size_t n_blocks = tile_blocks(t).size();
   const std::uint64_t records = n_blocks == 0 ? 0 : (raw_size(v2) - 8 * n_blocks) / 24;
   EXPECT_EQ(raw_size(v3), 8 * n_blocks + 16 * records);
@@ -437,12 +457,9 @@ TEST(Tile, OlderFormatsStillReadAndLaterFormatsAreRefused) {
   // Format 1 with XXH3 checksums, or format 2 with FNV-1a ones, is damage.
   auto rewrite = [&](std::vector<char> b, std::uint32_t version, std::uint64_t (*checksum)(const void*, std::size_t)) {
     unsigned char* h = reinterpret_cast<unsigned char*>(b.data());
-    auto put = [](unsigned char* p, std::uint64_t v, int n) {
-      for (int i = 0; i < n; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
-    };
-    put(h + 8, version, 4);
-    put(h + 48, checksum(h + 64, b.size() - 64), 8);
-    put(h + 56, checksum(h, 56), 8);
+    set_le(h + 8, version, 4);
+    set_le(h + 48, checksum(h + 64, b.size() - 64), 8);
+    set_le(h + 56, checksum(h, 56), 8);
     return b;
   };
   auto fnv = [](const void* d, std::size_t n) { return fnv1a64(d, n); };
@@ -647,11 +664,7 @@ namespace {
 // The raw chunks of a tile's bytes of format 5 to 7 (each decompressed; the planes of a chunk of
 // format 6 or 7 put back into units).
 std::vector<std::vector<unsigned char>> raw_chunks(const std::vector<char>& tile) {
-  auto get32 = [&](std::size_t at) {
-    std::uint32_t v = 0;
-    for (int i = 0; i < 4; ++i) v |= std::uint32_t(static_cast<unsigned char>(tile[at + i])) << (8 * i);
-    return v;
-  };
+  auto get32 = [&](std::size_t at) { return std::uint32_t(get_le(tile.data() + at, 4)); };
   std::vector<std::vector<unsigned char>> out;
   for (std::size_t at = 64; at < tile.size();) {
     const std::uint32_t raw_n = get32(at), stored_n = get32(at + 4);
@@ -733,8 +746,7 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
   // Where each block of the raw payload ends (its 16-byte key and mask, 16 bytes per present voxel).
   std::vector<std::size_t> ends;
   for (std::size_t at = 0; at < joined.size();) {
-    std::uint64_t mask = 0;
-    for (int i = 0; i < 8; ++i) mask |= std::uint64_t(joined[at + 8 + i]) << (8 * i);
+    const std::uint64_t mask = get_le(joined.data() + at + 8, 8);
     at += 16 + 16 * std::size_t(std::popcount(mask));
     ends.push_back(at);
   }
@@ -797,17 +809,12 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
   const std::uint32_t first_blocks = std::uint32_t(std::upper_bound(ends.begin(), ends.end(), chunks[0].size()) - ends.begin());
   const std::vector<char> halves = chunked_tile(7, {2, 0, 2}, 3, first_blocks, {chunks[0]});
   auto with_first_half = [&](std::uint32_t field) {
-    std::vector<unsigned char> stored(halves.begin() + 64, halves.end());
-    for (int i = 0; i < 4; ++i) stored[16 + i] = static_cast<unsigned char>(field >> (8 * i));
-    const std::uint64_t chunk_hash = XXH3_64bits(stored.data() + 16, stored.size() - 16);
-    for (int i = 0; i < 8; ++i) stored[8 + i] = static_cast<unsigned char>(chunk_hash >> (8 * i));
-    return tile_bytes(7, {2, 0, 2}, 3, first_blocks, chunks[0].size(), stored, XXH3_64bits(stored.data(), 16));
+    std::vector<unsigned char> packed(halves.begin() + 64 + 16, halves.end());
+    set_le(packed.data(), field, 4);
+    return framed_tile(7, {2, 0, 2}, 3, first_blocks, {{chunks[0].size(), packed}});
   };
   const std::uint32_t stored_n = std::uint32_t(halves.size() - 64 - 16);
-  const std::uint32_t field = std::uint32_t(static_cast<unsigned char>(halves[80])) |
-                              std::uint32_t(static_cast<unsigned char>(halves[81])) << 8 |
-                              std::uint32_t(static_cast<unsigned char>(halves[82])) << 16 |
-                              std::uint32_t(static_cast<unsigned char>(halves[83])) << 24;
+  const std::uint32_t field = std::uint32_t(get_le(halves.data() + 80, 4));
   ASSERT_GT(field, 0u);
   ASSERT_LT(field, stored_n - 4);
   write_bytes(dir / "halves_ok.tile", with_first_half(field));
@@ -826,13 +833,7 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
   // A chunk's stored bytes short of the first half's size, or a half beyond LZ4's bound on half
   // the raw bytes (the total within the bound on both), are damage too.
   auto with_stored = [&](std::vector<unsigned char> packed, std::size_t raw_n) {
-    std::vector<unsigned char> stored(16);
-    for (int i = 0; i < 4; ++i) stored[i] = static_cast<unsigned char>(raw_n >> (8 * i));
-    for (int i = 0; i < 4; ++i) stored[4 + i] = static_cast<unsigned char>(packed.size() >> (8 * i));
-    const std::uint64_t chunk_hash = XXH3_64bits(packed.data(), packed.size());
-    for (int i = 0; i < 8; ++i) stored[8 + i] = static_cast<unsigned char>(chunk_hash >> (8 * i));
-    stored.insert(stored.end(), packed.begin(), packed.end());
-    return tile_bytes(7, {2, 0, 2}, 3, first_blocks, raw_n, stored, XXH3_64bits(stored.data(), 16));
+    return framed_tile(7, {2, 0, 2}, 3, first_blocks, {{raw_n, std::move(packed)}});
   };
   write_bytes(dir / "halves.tile", with_stored({1, 0, 0}, 256));  // raw bytes the header finds plausible
   expect_input_error([&] {
@@ -840,8 +841,9 @@ TEST(Tile, ChunksHoldWholeBlocksOfTheRawPayload) {
     read_tile(dir / "halves.tile", fresh);
   }, "halves.tile", "chunk 0's halves do not fit its 3 stored bytes");
   const std::uint32_t half_bound = std::uint32_t(LZ4_compressBound(int(chunks[0].size() / 2)));
-  std::vector<unsigned char> lopsided(4 + half_bound + 8, 0);
-  for (int i = 0; i < 4; ++i) lopsided[i] = static_cast<unsigned char>((half_bound + 1) >> (8 * i));
+  std::vector<unsigned char> lopsided;
+  put_le(lopsided, half_bound + 1, 4);
+  lopsided.resize(4 + half_bound + 8, 0);
   write_bytes(dir / "halves.tile", with_stored(lopsided, chunks[0].size()));
   expect_input_error([&] {
     VoxelTable fresh(3);
