@@ -148,23 +148,13 @@ class BlockCache {
   // carved with (VoxelTable::make_part_shared).
   explicit BlockCache(BrickMap& map)
       : map_(map), thread_(unsigned(std::max(tbb::this_task_arena::current_thread_index(), 0))) {}
-  // The group with origin `origin` holding `key`; `brick` is set to its brick.
-  BlockGroup* group(VoxelKey key, VoxelKey origin, Brick** brick) {
+  // The group with origin `origin` (a tile block's: aligned_origin); `brick` is set to its brick.
+  // The hit is the common case (nine in ten at igea's level 11) and stays inline.
+  BlockGroup* group(VoxelKey origin, Brick** brick) {
     // A multiplicative hash's top bits (the table's 64-bit mix cost more than the rare
     // collisions this lets through).
     Entry& e = slots_[(origin.bits * 0x9e3779b97f4a7c15ull) >> (64 - kSlotBits)];
-    if (!e.group || e.origin != origin) {
-      // The brick too is mostly the one of the group before: its lookup (a shared lock and a
-      // hash map) was a third of a group's fetch.
-      const std::uint64_t brick_id = brick_of(key, map_.brick_level()).packed();
-      if (brick_id != brick_id_) {
-        brick_ = &map_.brick(BrickCoord::unpack(brick_id));
-        brick_id_ = brick_id;
-      }
-      e.group = map_.group(*brick_, key);  // may throw (a damaged tile): the entry is set after
-      e.brick = brick_;
-      e.origin = origin;
-    }
+    if (__builtin_expect(!e.group || e.origin != origin, 0)) fetch(e, origin);
     *brick = e.brick;
     return e.group;
   }
@@ -177,6 +167,18 @@ class BlockCache {
     BlockGroup* group = nullptr;
     Brick* brick = nullptr;
   };
+  [[gnu::noinline]] void fetch(Entry& e, VoxelKey origin) {
+    // The brick too is mostly the one of the group before: its lookup (a shared lock and a
+    // hash map) was a third of a group's fetch.
+    const std::uint64_t brick_id = brick_of(origin, map_.brick_level()).packed();
+    if (brick_id != brick_id_) {
+      brick_ = &map_.brick(BrickCoord::unpack(brick_id));
+      brick_id_ = brick_id;
+    }
+    e.group = map_.group(*brick_, origin);  // may throw (a damaged tile): the entry is set after
+    e.brick = brick_;
+    e.origin = origin;
+  }
   static constexpr int kSlotBits = 8;
   static constexpr std::size_t kSlots = std::size_t{1} << kSlotBits;
   BrickMap& map_;
@@ -1392,15 +1394,8 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         // the same place.
         const int log = block_log(level, brick_level), glog = tile_block_log(level, brick_level);
         const std::uint32_t in_group = (1u << glog) - 1;
-        const int shift_a = ax * glog;
+        const int shift_a = ax * glog, shift_b = bx * glog, shift_c = cx * glog;
         const std::uint8_t* const place = glog > log ? kTileToGroup.data() : kSamePlace.data();
-        const auto key_of = [&](std::int64_t ia, std::int64_t ib, std::int64_t ic) {
-          std::int64_t idx[3];
-          idx[ax] = ia;
-          idx[bx] = ib;
-          idx[cx] = ic;
-          return VoxelKey::make(level, std::uint32_t(idx[0]), std::uint32_t(idx[1]), std::uint32_t(idx[2]));
-        };
         std::size_t n = 0;  // candidates in the batch
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
           std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
@@ -1498,28 +1493,27 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           }
           // Phase 3: distance, weight and colour.
           const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned, wide_lanes);
-          // Phase 4: the voxels, each asked for ahead of its write. A column crosses a group (a 4^3
-          // region of 2^3 blocks, voxel_table.h) every 2^glog voxels, so a voxel's group is mostly
-          // the one in hand, and the key, its origin and the block cache are consulted once per
-          // group; its block is one of the group's parts, read without a lock.
-          std::int64_t run_ib = -1, run_ic = -1, run = -1;  // row, column and ia >> glog of the group in hand
-          BlockGroup* run_group = nullptr;
-          Brick* run_brick = nullptr;
-          std::uint32_t column_offset = 0;
+          // Phase 4: the voxels, each asked for ahead of its write. A voxel's group (a 4^3 region of
+          // 2^3 blocks, voxel_table.h) is its key with the low glog bits of each index cleared,
+          // put together here from the lattice indices, and its block is one of the group's parts,
+          // read without a lock. Each voxel asks the block cache, which mostly holds its group:
+          // checking first whether the group was the previous voxel's (a column crosses a group
+          // every 2^glog voxels, a new one every 2.2 candidates at igea's level 11) cost a
+          // mispredicted branch at half the groups, more than the cache's hash and compare
+          // (bench/README.md, session 47).
+          const std::uint64_t level_bits = std::uint64_t(level) << (3 * kCoordBits);
+          const std::uint32_t aligned = ~in_group;
+          const int key_a = ax * kCoordBits, key_b = bx * kCoordBits, key_c = cx * kCoordBits;
           for (std::size_t j = 0; j < sampled; ++j) {
             Candidate& cand = batch.cand[batch.sampled[j]];
-            const std::int64_t ia = cand.ia, ib = cand.ib, ic = cand.ic;
-            if (ic != run_ic || ib != run_ib || (ia >> glog) != run) {
-              const VoxelKey key = key_of(ia, ib, ic);
-              run_group = cache.group(key, aligned_origin(key, glog), &run_brick);
-              run = ia >> glog;
-              run_ic = ic;
-              run_ib = ib;
-              column_offset = ((std::uint32_t(ib) & in_group) << (bx * glog)) | ((std::uint32_t(ic) & in_group) << (cx * glog));
-            }
-            const unsigned q = place[column_offset | ((std::uint32_t(ia) & in_group) << shift_a)];
-            VoxelData* voxels = run_group->part[q >> 3].load(std::memory_order_acquire);
-            if (!voxels) voxels = cache.part(*run_brick, *run_group, int(q >> 3), log);
+            const std::uint32_t ia = std::uint32_t(cand.ia), ib = std::uint32_t(cand.ib), ic = std::uint32_t(cand.ic);
+            const VoxelKey origin{level_bits | std::uint64_t(ia & aligned) << key_a | std::uint64_t(ib & aligned) << key_b |
+                                  std::uint64_t(ic & aligned) << key_c};
+            Brick* brick;
+            BlockGroup* const group = cache.group(origin, &brick);
+            const unsigned q = place[((ib & in_group) << shift_b) | ((ic & in_group) << shift_c) | ((ia & in_group) << shift_a)];
+            VoxelData* voxels = group->part[q >> 3].load(std::memory_order_acquire);
+            if (!voxels) voxels = cache.part(*brick, *group, int(q >> 3), log);
             cand.voxel = voxels + (q & 7);
             __builtin_prefetch(cand.voxel, 1);
           }
