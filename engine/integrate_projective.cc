@@ -1395,6 +1395,10 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         const int log = block_log(level, brick_level), glog = tile_block_log(level, brick_level);
         const std::uint32_t in_group = (1u << glog) - 1;
         const int shift_a = ax * glog, shift_b = bx * glog, shift_c = cx * glog;
+        // A voxel's group origin: its key with the low glog bits of each index cleared (phase 4).
+        const std::uint64_t level_bits = VoxelKey::level_bits(level);
+        const std::uint32_t aligned = ~in_group;
+        const int key_a = VoxelKey::coord_shift(ax), key_b = VoxelKey::coord_shift(bx), key_c = VoxelKey::coord_shift(cx);
         const std::uint8_t* const place = glog > log ? kTileToGroup.data() : kSamePlace.data();
         std::size_t n = 0;  // candidates in the batch
         for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
@@ -1501,9 +1505,6 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
           // every 2^glog voxels, a new one every 2.2 candidates at igea's level 11) cost a
           // mispredicted branch at half the groups, more than the cache's hash and compare
           // (bench/README.md, session 47).
-          const std::uint64_t level_bits = std::uint64_t(level) << (3 * kCoordBits);
-          const std::uint32_t aligned = ~in_group;
-          const int key_a = ax * kCoordBits, key_b = bx * kCoordBits, key_c = cx * kCoordBits;
           for (std::size_t j = 0; j < sampled; ++j) {
             Candidate& cand = batch.cand[batch.sampled[j]];
             const std::uint32_t ia = std::uint32_t(cand.ia), ib = std::uint32_t(cand.ib), ic = std::uint32_t(cand.ic);

@@ -123,9 +123,10 @@ void reexec_with_heap_tunables(char** argv) {
   // The balloon matters only where the page size is still ours to choose: not in the re-executed
   // process (its hugetlb is set), nor where the user set it, nor where the kernel offers no huge
   // pages or glibc has no hugetlb tunable.
-  const bool reporting = !users_hugetlb(before) && gives_huge_pages(mode) &&
-                         has_hugetlb_tunable(gnu_get_libc_version()) && balloon_reports_free_pages();
-  const std::optional<std::string> value = huge_page_tunables(before, mode, gnu_get_libc_version(), reporting);
+  const std::string_view libc = gnu_get_libc_version();
+  const bool reporting = !users_hugetlb(before) && gives_huge_pages(mode) && has_hugetlb_tunable(libc) &&
+                         balloon_reports_free_pages();
+  const std::optional<std::string> value = huge_page_tunables(before, mode, libc, reporting);
   if (!value) return;
   const std::string saved = before ? before : "";
   // Under `always` the kernel gives huge pages unasked: hugetlb=0 alone would not keep the heap

@@ -26,9 +26,12 @@ inline constexpr std::uint64_t kCoordMask = (std::uint64_t{1} << kCoordBits) - 1
 struct VoxelKey {
   std::uint64_t bits = 0;
 
+  // The layout, for code that puts keys together field by field (integration's lattice axes).
+  static constexpr std::uint64_t level_bits(int level) { return std::uint64_t(level) << (3 * kCoordBits); }
+  static constexpr int coord_shift(int axis) { return axis * kCoordBits; }  // axis 0 = x, 1 = y, 2 = z
   static constexpr VoxelKey make(int level, std::uint32_t x, std::uint32_t y, std::uint32_t z) {
-    return VoxelKey{(std::uint64_t(level) << (3 * kCoordBits)) | (std::uint64_t(z) << (2 * kCoordBits)) |
-                    (std::uint64_t(y) << kCoordBits) | std::uint64_t(x)};
+    return VoxelKey{level_bits(level) | (std::uint64_t(z) << coord_shift(2)) | (std::uint64_t(y) << coord_shift(1)) |
+                    std::uint64_t(x)};
   }
   constexpr int level() const { return int(bits >> (3 * kCoordBits)); }
   constexpr std::uint32_t x() const { return std::uint32_t(bits & kCoordMask); }
