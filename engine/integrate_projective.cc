@@ -261,6 +261,7 @@ struct Prepared {
   };
   std::vector<FrustumSide> column_side, row_side;
   Eigen::Matrix3d Rt;  // the sensor's rotation, transposed
+  Vector3d centre;     // the sensor's centre
   IntegrateStats stats;  // triangles inserted, per level
 };
 
@@ -356,6 +357,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   p.TX = (QW + kTile - 1) / kTile, p.TY = (QH + kTile - 1) / kTile;
   const int TX = p.TX, TY = p.TY;
   p.Rt = sensor.R.transpose();
+  p.centre = sensor.centre();
   {
     // The sides of the quads [first, end) along image axis `axis` (focal length f, principal
     // point c), widened by a thousandth of a pixel: half-spaces a . x_cam >= 0 in the camera,
@@ -1273,6 +1275,210 @@ bool has_prisms(const Prepared& p, int tile, int level) {
   return tl.zmin <= tl.zmax;
 }
 
+// The kernel on one work item: the candidate voxels of `fr`, its tile's frustum slab at `level`
+// (clipped to the region integrated), projected, owned, sampled and written in phases. Returns the
+// contributions made.
+std::size_t integrate_item(const Prepared& p, const ItemFrustum& fr, int level, const RootCube& root,
+                           const IntegrateOptions& options, int brick_level, bool wide_lanes, BlockCache& cache,
+                           ItemBatch& batch, RowPrefilter& prefilter) {
+  const DepthFrame& frame = *p.frame;
+  const Sensor& sensor = frame.sensor;
+  const Eigen::Matrix3d& R = sensor.R;
+  const std::vector<Quad>& quad = p.quad;
+  const int QW = p.QW;
+  const ScratchArray<GridTriangle>& tris = p.tris;
+  const QuadShapes& shapes = p.shapes;
+  const Vector3d& centre = p.centre;
+  const std::uint32_t* packed = p.colour.empty() ? nullptr : p.colour.data();
+
+  const int c0 = fr.c0, c1 = fr.c1, r0 = fr.r0, r1 = fr.r1;
+  const int ax = fr.ax, bx = fr.bx, cx = fr.cx;
+  const std::int64_t a0 = fr.first[ax], a1 = fr.last[ax];
+  const double h = root.cell_size(level);
+  // Each half-space, along a column (ib, ic): m . X - k = v0 + ib vb + ic vc + (a - root.min) ma.
+  // The planes carry margins far above the rounding of this affine form.
+  ColumnPlane cp[8];
+  for (int k = 0; k < 8; ++k) {
+    const HalfSpace& hs = fr.planes[k];
+    const double inv_ma = hs.m[ax] != 0 ? 1.0 / hs.m[ax] : 0.0;
+    cp[k] = {hs.m.dot(root.min) - hs.k, hs.m[bx] * h, hs.m[cx] * h, hs.m[ax], inv_ma, inv_ma / h};
+  }
+  // The prefilter pays its set-up (every pair of a lower and an upper bound) only where the
+  // index box has columns enough to skip: most items' boxes are a few voxels across, and
+  // their empty columns cost less than the set-up (bench/README.md, session 39).
+  const std::int64_t box_columns = (fr.last[bx] - fr.first[bx] + 1) * (fr.last[cx] - fr.first[cx] + 1);
+  const bool use_prefilter = box_columns > kPrefilterColumns;
+  if (use_prefilter) prefilter.set(cp, double(a0 - 1) * h, double(a1 + 1) * h, 1e-6 * h);
+  // The planes by their part in a column's clip: parallel to it, bounding t below, above.
+  int parallel[8], lower[8], upper[8], n_parallel = 0, n_lower = 0, n_upper = 0;
+  for (int k = 0; k < 8; ++k) {
+    if (cp[k].ma == 0)
+      parallel[n_parallel++] = k;
+    else if (cp[k].ma > 0)
+      lower[n_lower++] = k;
+    else
+      upper[n_upper++] = k;
+  }
+  ColumnBounds bounds;
+  bounds.set_item(cp, lower, n_lower, upper, n_upper);
+  const ColumnProjector project(sensor, ax, h, ColumnTile{c0, c1, r0, r1});
+  // Groups of this level: 2^glog voxels per axis, as blocks of 2^log (VoxelTable). Phase 4
+  // below finds a voxel's place in its group's tile block by these offsets (x fastest), and
+  // its block and place there by `place`: kTileToGroup where a group is eight blocks, else
+  // the same place.
+  const int log = block_log(level, brick_level), glog = tile_block_log(level, brick_level);
+  const std::uint32_t in_group = (1u << glog) - 1;
+  const int shift_a = ax * glog, shift_b = bx * glog, shift_c = cx * glog;
+  // A voxel's group origin: its key with the low glog bits of each index cleared (phase 4).
+  const std::uint64_t level_bits = VoxelKey::level_bits(level);
+  const std::uint32_t aligned = ~in_group;
+  const int key_a = VoxelKey::coord_shift(ax), key_b = VoxelKey::coord_shift(bx), key_c = VoxelKey::coord_shift(cx);
+  const std::uint8_t* const place = glog > log ? kTileToGroup.data() : kSamePlace.data();
+  std::size_t n = 0;  // candidates in the batch
+  for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
+    std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
+    if (use_prefilter && !prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
+    double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
+    for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
+    bounds.set_row(cp, row_value);
+    Vector3d base;  // the column's centre at ia = 0
+    base[ax] = root.min[ax];
+    base[bx] = root.min[bx] + h * double(ib);
+    double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
+    camera_terms(R, base, bx, terms);
+    // The item's candidates go through the kernel in phases, each a loop over all of them:
+    // projection (row by row, here), owner, sample, voxel, write. A candidate's work is one
+    // long chain of dependent steps (a division, a floor, the quad, the shape, the owner's
+    // record, a square root, two more divisions, the voxel), longer than the core's window
+    // of instructions, so done candidate by candidate the chains ran one after another; in
+    // loops over many candidates the chains overlap, and the owners' records and the voxels
+    // asked for ahead of use (phases 2 and 4) arrive while others are worked on. Each voxel
+    // gets the same arithmetic either way, and at most one contribution per depth map, so
+    // the field is the same.
+    for (std::int64_t ic = ic0; ic <= ic1; ++ic) {
+      bool empty = false;
+      for (int j = 0; j < n_parallel && !empty; ++j)
+        empty = row_value[parallel[j]] + double(ic) * cp[parallel[j]].vc < 0;
+      if (empty) continue;
+      double tmin, tmax;  // cells along the column
+      bounds.range(double(ic), &tmin, &tmax);
+      if (tmin > tmax) continue;
+      tmin = std::max(tmin, double(a0 - 1));  // finite before the integer casts
+      tmax = std::min(tmax, double(a1 + 1));
+      const std::int64_t i0 = std::max<std::int64_t>(a0, -fast_floor(-tmin));  // ceil
+      const std::int64_t i1 = std::min<std::int64_t>(a1, fast_floor(tmax));
+      if (i1 < i0) continue;
+      base[cx] = root.min[cx] + h * double(ic);
+      camera_terms(R, base, cx, terms);
+      // Room for every voxel of the column and one more (project_column_pairs).
+      if (n + std::size_t(i1 - i0 + 2) > batch.capacity) batch.grow(n + std::size_t(i1 - i0 + 2), n);
+      // Phase 1: project; mark the voxels whose quad is this tile's.
+      n = project(terms, base, i0, i1, ib, ic, batch, n);
+    }
+  }
+  {
+    // Phase 2: the owner, one of the quad's triangles (chosen by the diagonal's side if the
+    // quad is split in two, else the likelier tried first), or, on the quad's left or top
+    // border, one of the neighbouring quads' (edge functions give a shared edge to one side
+    // only). Trying the previous voxel's owner first, as this once did, saves nothing: it
+    // owns the next only a third of the time (a step along a column moves the projection up
+    // to 0.8 pixel), and the extra test and its unpredictable branch cost more
+    // (bench/README.md, session 31).
+    std::size_t owned = 0;
+    for (std::uint32_t k = 0; k < n; ++k) {
+      Candidate& cand = batch.cand[k];
+      if (!cand.in) continue;
+      const int col = cand.col, row = cand.row;
+      const double U = cand.uv.x(), V = cand.uv.y();
+      auto try_triangle = [&](const Quad& qd, int slot, double u, double v) {
+        const std::uint8_t code = qd.shape[slot];
+        if (!(code & Quad::kUsable)) return false;
+        const Ownership& s = shapes.shape[code & 63];
+        if (!s.owns_local(u, v, cand.E)) return false;
+        cand.owner = qd.tri[slot];
+        cand.shape = &s;
+        return true;
+      };
+      // The quad d columns left and e rows up of q's own, where q's coordinates are one more.
+      auto try_quad = [&](int d, int e, bool first_guess) {
+        const int qr = row - e, qc = col - d;
+        if (qr < 0 || qc < 0) return false;
+        const Quad& qd = quad[std::size_t(qr) * QW + qc];
+        const int first = first_guess ? 0 : 1;
+        const double u = U + double(d), v = V + double(e);
+        return try_triangle(qd, first, u, v) || try_triangle(qd, 1 - first, u, v);
+      };
+      const Quad& here = quad[std::size_t(row) * QW + col];
+      if ((here.split & Quad::kSplit) && U > 0.5 && V > 0.5) {
+        // Off the quad's left and top borders, q lies strictly inside both triangles' quad
+        // sides, so the side of the shared diagonal alone picks the owner (the two evaluate
+        // it to the same bits, each owning one side of it) and its other two edge tests pass.
+        const Ownership& first = shapes.shape[here.shape[0] & 63];
+        const double diagonal = first.edge_local(here.split & 3, U, V);
+        const int slot = (diagonal >= 0) == bool(here.split & Quad::kPositive) ? 0 : 1;
+        const Ownership& s = shapes.shape[here.shape[slot] & 63];
+        s.edges_local(U, V, cand.E);
+        cand.owner = here.tri[slot];
+        cand.shape = &s;
+      } else if (!try_quad(0, 0, (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0)) {
+        const bool left = U == 0.5, top = V == 0.5;
+        if (!((left && try_quad(1, 0, true)) || (top && try_quad(0, 1, true)) ||
+              (left && top && try_quad(1, 1, true))))
+          continue;
+      }
+      __builtin_prefetch(&tris[cand.owner]);  // read in the next phase
+      batch.owned[owned++] = k;
+    }
+    // Phase 3: distance, weight and colour.
+    const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned, wide_lanes);
+    // Phase 4: the voxels, each asked for ahead of its write. A voxel's group (a 4^3 region of
+    // 2^3 blocks, voxel_table.h) is its key with the low glog bits of each index cleared,
+    // put together here from the lattice indices, and its block is one of the group's parts,
+    // read without a lock. Each voxel asks the block cache, which mostly holds its group:
+    // checking first whether the group was the previous voxel's (a column crosses a group
+    // every 2^glog voxels, a new one every 2.2 candidates at igea's level 11) cost a
+    // mispredicted branch at half the groups, more than the cache's hash and compare
+    // (bench/README.md, session 47).
+    for (std::size_t j = 0; j < sampled; ++j) {
+      Candidate& cand = batch.cand[batch.sampled[j]];
+      const std::uint32_t ia = std::uint32_t(cand.ia), ib = std::uint32_t(cand.ib), ic = std::uint32_t(cand.ic);
+      const VoxelKey origin{level_bits | std::uint64_t(ia & aligned) << key_a | std::uint64_t(ib & aligned) << key_b |
+                            std::uint64_t(ic & aligned) << key_c};
+      Brick* brick;
+      BlockGroup* const group = cache.group(origin, &brick);
+      const unsigned q = place[((ib & in_group) << shift_b) | ((ic & in_group) << shift_c) | ((ia & in_group) << shift_a)];
+      VoxelData* voxels = group->part[q >> 3].load(std::memory_order_acquire);
+      if (!voxels) voxels = cache.part(*brick, *group, int(q >> 3), log);
+      cand.voxel = voxels + (q & 7);
+      __builtin_prefetch(cand.voxel, 1);
+    }
+    // Phase 5: the writes, four at a time where the depth map has colour (the voxels of an
+    // item are distinct: each gets at most one contribution).
+    std::size_t j = 0;
+    if (!frame.colour.empty()) {
+      for (; j + 4 <= sampled; j += 4) {
+        VoxelData* voxels[4];
+        float distance[4], weight[4];
+        const std::uint8_t* colour[4];
+        for (int lane = 0; lane < 4; ++lane) {
+          const Candidate& cand = batch.cand[batch.sampled[j + lane]];
+          voxels[lane] = cand.voxel;
+          distance[lane] = cand.sample.distance;
+          weight[lane] = cand.sample.weight;
+          colour[lane] = cand.sample.colour;
+        }
+        accumulate4(voxels, distance, weight, colour);
+      }
+    }
+    for (; j < sampled; ++j) {
+      const Candidate& cand = batch.cand[batch.sampled[j]];
+      const VoxelSample& v = cand.sample;
+      accumulate(*cand.voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
+    }
+    return sampled;
+  }
+}
+
 }  // namespace
 
 struct IntegrateScratch::Tables {
@@ -1298,15 +1504,10 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
   if (region) region_box = world_box(*region, root, map.brick_level());
   if (!prepare(frame, triangles, root, options, region ? &region_box : nullptr, &p)) return false;
   const Sensor& sensor = frame.sensor;
-  const int QW = p.QW, TX = p.TX, TY = p.TY;
-  const std::vector<Quad>& quad = p.quad;
-  const ScratchArray<GridTriangle>& tris = p.tris;
-  const QuadShapes& shapes = p.shapes;
+  const int TX = p.TX, TY = p.TY;
   const Eigen::Matrix3d& R = sensor.R;
-  const Vector3d centre = sensor.centre();
   IntegrateStats stats = p.stats;
   const bool wide_lanes = scratch ? scratch->wide_lanes : cpu_has_avx2();
-  const std::uint32_t* packed = p.colour.empty() ? nullptr : p.colour.data();
   // Work items (tile, level), ordered by the brick around their middle ("home"), so that items
   // run brick region by brick region.
   const Eigen::Matrix3d Rt = R.transpose();
@@ -1357,192 +1558,7 @@ bool integrate_frame_projective(const DepthFrame& frame, const std::vector<Frame
         ItemFrustum fr = item_frustum(p, root, tile, level);
         if (region) fr.clip(*region, level, brick_level);
         if (fr.empty()) continue;
-        const int c0 = fr.c0, c1 = fr.c1, r0 = fr.r0, r1 = fr.r1;
-        const int ax = fr.ax, bx = fr.bx, cx = fr.cx;
-        const std::int64_t a0 = fr.first[ax], a1 = fr.last[ax];
-        const double h = root.cell_size(level);
-        // Each half-space, along a column (ib, ic): m . X - k = v0 + ib vb + ic vc + (a - root.min) ma.
-        // The planes carry margins far above the rounding of this affine form.
-        ColumnPlane cp[8];
-        for (int k = 0; k < 8; ++k) {
-          const HalfSpace& hs = fr.planes[k];
-          const double inv_ma = hs.m[ax] != 0 ? 1.0 / hs.m[ax] : 0.0;
-          cp[k] = {hs.m.dot(root.min) - hs.k, hs.m[bx] * h, hs.m[cx] * h, hs.m[ax], inv_ma, inv_ma / h};
-        }
-        // The prefilter pays its set-up (every pair of a lower and an upper bound) only where the
-        // index box has columns enough to skip: most items' boxes are a few voxels across, and
-        // their empty columns cost less than the set-up (bench/README.md, session 39).
-        const std::int64_t box_columns = (fr.last[bx] - fr.first[bx] + 1) * (fr.last[cx] - fr.first[cx] + 1);
-        const bool use_prefilter = box_columns > kPrefilterColumns;
-        if (use_prefilter) prefilter.set(cp, double(a0 - 1) * h, double(a1 + 1) * h, 1e-6 * h);
-        // The planes by their part in a column's clip: parallel to it, bounding t below, above.
-        int parallel[8], lower[8], upper[8], n_parallel = 0, n_lower = 0, n_upper = 0;
-        for (int k = 0; k < 8; ++k) {
-          if (cp[k].ma == 0)
-            parallel[n_parallel++] = k;
-          else if (cp[k].ma > 0)
-            lower[n_lower++] = k;
-          else
-            upper[n_upper++] = k;
-        }
-        ColumnBounds bounds;
-        bounds.set_item(cp, lower, n_lower, upper, n_upper);
-        const ColumnProjector project(sensor, ax, h, ColumnTile{c0, c1, r0, r1});
-        // Groups of this level: 2^glog voxels per axis, as blocks of 2^log (VoxelTable). Phase 4
-        // below finds a voxel's place in its group's tile block by these offsets (x fastest), and
-        // its block and place there by `place`: kTileToGroup where a group is eight blocks, else
-        // the same place.
-        const int log = block_log(level, brick_level), glog = tile_block_log(level, brick_level);
-        const std::uint32_t in_group = (1u << glog) - 1;
-        const int shift_a = ax * glog, shift_b = bx * glog, shift_c = cx * glog;
-        // A voxel's group origin: its key with the low glog bits of each index cleared (phase 4).
-        const std::uint64_t level_bits = VoxelKey::level_bits(level);
-        const std::uint32_t aligned = ~in_group;
-        const int key_a = VoxelKey::coord_shift(ax), key_b = VoxelKey::coord_shift(bx), key_c = VoxelKey::coord_shift(cx);
-        const std::uint8_t* const place = glog > log ? kTileToGroup.data() : kSamePlace.data();
-        std::size_t n = 0;  // candidates in the batch
-        for (std::int64_t ib = fr.first[bx]; ib <= fr.last[bx]; ++ib) {
-          std::int64_t ic0 = fr.first[cx], ic1 = fr.last[cx];
-          if (use_prefilter && !prefilter.clip_row(double(ib), &ic0, &ic1)) continue;
-          double row_value[8];  // each plane's v0 + ib vb, the row's share of its affine form
-          for (int k = 0; k < 8; ++k) row_value[k] = cp[k].v0 + double(ib) * cp[k].vb;
-          bounds.set_row(cp, row_value);
-          Vector3d base;  // the column's centre at ia = 0
-          base[ax] = root.min[ax];
-          base[bx] = root.min[bx] + h * double(ib);
-          double terms[3][3];  // R(i, a) X[a]: the column's fixed axes here, its own per voxel
-          camera_terms(R, base, bx, terms);
-          // The item's candidates go through the kernel in phases, each a loop over all of them:
-          // projection (row by row, here), owner, sample, voxel, write. A candidate's work is one
-          // long chain of dependent steps (a division, a floor, the quad, the shape, the owner's
-          // record, a square root, two more divisions, the voxel), longer than the core's window
-          // of instructions, so done candidate by candidate the chains ran one after another; in
-          // loops over many candidates the chains overlap, and the owners' records and the voxels
-          // asked for ahead of use (phases 2 and 4) arrive while others are worked on. Each voxel
-          // gets the same arithmetic either way, and at most one contribution per depth map, so
-          // the field is the same.
-          for (std::int64_t ic = ic0; ic <= ic1; ++ic) {
-            bool empty = false;
-            for (int j = 0; j < n_parallel && !empty; ++j)
-              empty = row_value[parallel[j]] + double(ic) * cp[parallel[j]].vc < 0;
-            if (empty) continue;
-            double tmin, tmax;  // cells along the column
-            bounds.range(double(ic), &tmin, &tmax);
-            if (tmin > tmax) continue;
-            tmin = std::max(tmin, double(a0 - 1));  // finite before the integer casts
-            tmax = std::min(tmax, double(a1 + 1));
-            const std::int64_t i0 = std::max<std::int64_t>(a0, -fast_floor(-tmin));  // ceil
-            const std::int64_t i1 = std::min<std::int64_t>(a1, fast_floor(tmax));
-            if (i1 < i0) continue;
-            base[cx] = root.min[cx] + h * double(ic);
-            camera_terms(R, base, cx, terms);
-            // Room for every voxel of the column and one more (project_column_pairs).
-            if (n + std::size_t(i1 - i0 + 2) > batch.capacity) batch.grow(n + std::size_t(i1 - i0 + 2), n);
-            // Phase 1: project; mark the voxels whose quad is this tile's.
-            n = project(terms, base, i0, i1, ib, ic, batch, n);
-          }
-        }
-        {
-          // Phase 2: the owner, one of the quad's triangles (chosen by the diagonal's side if the
-          // quad is split in two, else the likelier tried first), or, on the quad's left or top
-          // border, one of the neighbouring quads' (edge functions give a shared edge to one side
-          // only). Trying the previous voxel's owner first, as this once did, saves nothing: it
-          // owns the next only a third of the time (a step along a column moves the projection up
-          // to 0.8 pixel), and the extra test and its unpredictable branch cost more
-          // (bench/README.md, session 31).
-          std::size_t owned = 0;
-          for (std::uint32_t k = 0; k < n; ++k) {
-            Candidate& cand = batch.cand[k];
-            if (!cand.in) continue;
-            const int col = cand.col, row = cand.row;
-            const double U = cand.uv.x(), V = cand.uv.y();
-            auto try_triangle = [&](const Quad& qd, int slot, double u, double v) {
-              const std::uint8_t code = qd.shape[slot];
-              if (!(code & Quad::kUsable)) return false;
-              const Ownership& s = shapes.shape[code & 63];
-              if (!s.owns_local(u, v, cand.E)) return false;
-              cand.owner = qd.tri[slot];
-              cand.shape = &s;
-              return true;
-            };
-            // The quad d columns left and e rows up of q's own, where q's coordinates are one more.
-            auto try_quad = [&](int d, int e, bool first_guess) {
-              const int qr = row - e, qc = col - d;
-              if (qr < 0 || qc < 0) return false;
-              const Quad& qd = quad[std::size_t(qr) * QW + qc];
-              const int first = first_guess ? 0 : 1;
-              const double u = U + double(d), v = V + double(e);
-              return try_triangle(qd, first, u, v) || try_triangle(qd, 1 - first, u, v);
-            };
-            const Quad& here = quad[std::size_t(row) * QW + col];
-            if ((here.split & Quad::kSplit) && U > 0.5 && V > 0.5) {
-              // Off the quad's left and top borders, q lies strictly inside both triangles' quad
-              // sides, so the side of the shared diagonal alone picks the owner (the two evaluate
-              // it to the same bits, each owning one side of it) and its other two edge tests pass.
-              const Ownership& first = shapes.shape[here.shape[0] & 63];
-              const double diagonal = first.edge_local(here.split & 3, U, V);
-              const int slot = (diagonal >= 0) == bool(here.split & Quad::kPositive) ? 0 : 1;
-              const Ownership& s = shapes.shape[here.shape[slot] & 63];
-              s.edges_local(U, V, cand.E);
-              cand.owner = here.tri[slot];
-              cand.shape = &s;
-            } else if (!try_quad(0, 0, (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0)) {
-              const bool left = U == 0.5, top = V == 0.5;
-              if (!((left && try_quad(1, 0, true)) || (top && try_quad(0, 1, true)) ||
-                    (left && top && try_quad(1, 1, true))))
-                continue;
-            }
-            __builtin_prefetch(&tris[cand.owner]);  // read in the next phase
-            batch.owned[owned++] = k;
-          }
-          // Phase 3: distance, weight and colour.
-          const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned, wide_lanes);
-          // Phase 4: the voxels, each asked for ahead of its write. A voxel's group (a 4^3 region of
-          // 2^3 blocks, voxel_table.h) is its key with the low glog bits of each index cleared,
-          // put together here from the lattice indices, and its block is one of the group's parts,
-          // read without a lock. Each voxel asks the block cache, which mostly holds its group:
-          // checking first whether the group was the previous voxel's (a column crosses a group
-          // every 2^glog voxels, a new one every 2.2 candidates at igea's level 11) cost a
-          // mispredicted branch at half the groups, more than the cache's hash and compare
-          // (bench/README.md, session 47).
-          for (std::size_t j = 0; j < sampled; ++j) {
-            Candidate& cand = batch.cand[batch.sampled[j]];
-            const std::uint32_t ia = std::uint32_t(cand.ia), ib = std::uint32_t(cand.ib), ic = std::uint32_t(cand.ic);
-            const VoxelKey origin{level_bits | std::uint64_t(ia & aligned) << key_a | std::uint64_t(ib & aligned) << key_b |
-                                  std::uint64_t(ic & aligned) << key_c};
-            Brick* brick;
-            BlockGroup* const group = cache.group(origin, &brick);
-            const unsigned q = place[((ib & in_group) << shift_b) | ((ic & in_group) << shift_c) | ((ia & in_group) << shift_a)];
-            VoxelData* voxels = group->part[q >> 3].load(std::memory_order_acquire);
-            if (!voxels) voxels = cache.part(*brick, *group, int(q >> 3), log);
-            cand.voxel = voxels + (q & 7);
-            __builtin_prefetch(cand.voxel, 1);
-          }
-          // Phase 5: the writes, four at a time where the depth map has colour (the voxels of an
-          // item are distinct: each gets at most one contribution).
-          std::size_t j = 0;
-          if (!frame.colour.empty()) {
-            for (; j + 4 <= sampled; j += 4) {
-              VoxelData* voxels[4];
-              float distance[4], weight[4];
-              const std::uint8_t* colour[4];
-              for (int lane = 0; lane < 4; ++lane) {
-                const Candidate& cand = batch.cand[batch.sampled[j + lane]];
-                voxels[lane] = cand.voxel;
-                distance[lane] = cand.sample.distance;
-                weight[lane] = cand.sample.weight;
-                colour[lane] = cand.sample.colour;
-              }
-              accumulate4(voxels, distance, weight, colour);
-            }
-          }
-          for (; j < sampled; ++j) {
-            const Candidate& cand = batch.cand[batch.sampled[j]];
-            const VoxelSample& v = cand.sample;
-            accumulate(*cand.voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
-          }
-          local += sampled;
-        }
+        local += integrate_item(p, fr, level, root, options, brick_level, wide_lanes, cache, batch, prefilter);
       }
       contributions.fetch_add(local, std::memory_order_relaxed);
     });
