@@ -431,7 +431,7 @@ bool prepare(const DepthFrame& frame, const std::vector<FrameTriangle>& triangle
   // never degenerate.
   p.tris.resize(triangles.size());
   ScratchArray<GridTriangle>& tris = p.tris;
-  const Vector3d centre = sensor.centre();
+  const Vector3d& centre = p.centre;
   p.stats = tbb::parallel_reduce(
       tbb::blocked_range<int>(0, QH, 16), IntegrateStats{},
       [&](const tbb::blocked_range<int>& rows, IntegrateStats c) {
@@ -1376,107 +1376,105 @@ std::size_t integrate_item(const Prepared& p, const ItemFrustum& fr, int level, 
       n = project(terms, base, i0, i1, ib, ic, batch, n);
     }
   }
-  {
-    // Phase 2: the owner, one of the quad's triangles (chosen by the diagonal's side if the
-    // quad is split in two, else the likelier tried first), or, on the quad's left or top
-    // border, one of the neighbouring quads' (edge functions give a shared edge to one side
-    // only). Trying the previous voxel's owner first, as this once did, saves nothing: it
-    // owns the next only a third of the time (a step along a column moves the projection up
-    // to 0.8 pixel), and the extra test and its unpredictable branch cost more
-    // (bench/README.md, session 31).
-    std::size_t owned = 0;
-    for (std::uint32_t k = 0; k < n; ++k) {
-      Candidate& cand = batch.cand[k];
-      if (!cand.in) continue;
-      const int col = cand.col, row = cand.row;
-      const double U = cand.uv.x(), V = cand.uv.y();
-      auto try_triangle = [&](const Quad& qd, int slot, double u, double v) {
-        const std::uint8_t code = qd.shape[slot];
-        if (!(code & Quad::kUsable)) return false;
-        const Ownership& s = shapes.shape[code & 63];
-        if (!s.owns_local(u, v, cand.E)) return false;
-        cand.owner = qd.tri[slot];
-        cand.shape = &s;
-        return true;
-      };
-      // The quad d columns left and e rows up of q's own, where q's coordinates are one more.
-      auto try_quad = [&](int d, int e, bool first_guess) {
-        const int qr = row - e, qc = col - d;
-        if (qr < 0 || qc < 0) return false;
-        const Quad& qd = quad[std::size_t(qr) * QW + qc];
-        const int first = first_guess ? 0 : 1;
-        const double u = U + double(d), v = V + double(e);
-        return try_triangle(qd, first, u, v) || try_triangle(qd, 1 - first, u, v);
-      };
-      const Quad& here = quad[std::size_t(row) * QW + col];
-      if ((here.split & Quad::kSplit) && U > 0.5 && V > 0.5) {
-        // Off the quad's left and top borders, q lies strictly inside both triangles' quad
-        // sides, so the side of the shared diagonal alone picks the owner (the two evaluate
-        // it to the same bits, each owning one side of it) and its other two edge tests pass.
-        const Ownership& first = shapes.shape[here.shape[0] & 63];
-        const double diagonal = first.edge_local(here.split & 3, U, V);
-        const int slot = (diagonal >= 0) == bool(here.split & Quad::kPositive) ? 0 : 1;
-        const Ownership& s = shapes.shape[here.shape[slot] & 63];
-        s.edges_local(U, V, cand.E);
-        cand.owner = here.tri[slot];
-        cand.shape = &s;
-      } else if (!try_quad(0, 0, (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0)) {
-        const bool left = U == 0.5, top = V == 0.5;
-        if (!((left && try_quad(1, 0, true)) || (top && try_quad(0, 1, true)) ||
-              (left && top && try_quad(1, 1, true))))
-          continue;
-      }
-      __builtin_prefetch(&tris[cand.owner]);  // read in the next phase
-      batch.owned[owned++] = k;
+  // Phase 2: the owner, one of the quad's triangles (chosen by the diagonal's side if the
+  // quad is split in two, else the likelier tried first), or, on the quad's left or top
+  // border, one of the neighbouring quads' (edge functions give a shared edge to one side
+  // only). Trying the previous voxel's owner first, as this once did, saves nothing: it
+  // owns the next only a third of the time (a step along a column moves the projection up
+  // to 0.8 pixel), and the extra test and its unpredictable branch cost more
+  // (bench/README.md, session 31).
+  std::size_t owned = 0;
+  for (std::uint32_t k = 0; k < n; ++k) {
+    Candidate& cand = batch.cand[k];
+    if (!cand.in) continue;
+    const int col = cand.col, row = cand.row;
+    const double U = cand.uv.x(), V = cand.uv.y();
+    auto try_triangle = [&](const Quad& qd, int slot, double u, double v) {
+      const std::uint8_t code = qd.shape[slot];
+      if (!(code & Quad::kUsable)) return false;
+      const Ownership& s = shapes.shape[code & 63];
+      if (!s.owns_local(u, v, cand.E)) return false;
+      cand.owner = qd.tri[slot];
+      cand.shape = &s;
+      return true;
+    };
+    // The quad d columns left and e rows up of q's own, where q's coordinates are one more.
+    auto try_quad = [&](int d, int e, bool first_guess) {
+      const int qr = row - e, qc = col - d;
+      if (qr < 0 || qc < 0) return false;
+      const Quad& qd = quad[std::size_t(qr) * QW + qc];
+      const int first = first_guess ? 0 : 1;
+      const double u = U + double(d), v = V + double(e);
+      return try_triangle(qd, first, u, v) || try_triangle(qd, 1 - first, u, v);
+    };
+    const Quad& here = quad[std::size_t(row) * QW + col];
+    if ((here.split & Quad::kSplit) && U > 0.5 && V > 0.5) {
+      // Off the quad's left and top borders, q lies strictly inside both triangles' quad
+      // sides, so the side of the shared diagonal alone picks the owner (the two evaluate
+      // it to the same bits, each owning one side of it) and its other two edge tests pass.
+      const Ownership& first = shapes.shape[here.shape[0] & 63];
+      const double diagonal = first.edge_local(here.split & 3, U, V);
+      const int slot = (diagonal >= 0) == bool(here.split & Quad::kPositive) ? 0 : 1;
+      const Ownership& s = shapes.shape[here.shape[slot] & 63];
+      s.edges_local(U, V, cand.E);
+      cand.owner = here.tri[slot];
+      cand.shape = &s;
+    } else if (!try_quad(0, 0, (U - 1.0) * here.dx + (V - 1.0) * here.dy >= 0)) {
+      const bool left = U == 0.5, top = V == 0.5;
+      if (!((left && try_quad(1, 0, true)) || (top && try_quad(0, 1, true)) ||
+            (left && top && try_quad(1, 1, true))))
+        continue;
     }
-    // Phase 3: distance, weight and colour.
-    const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned, wide_lanes);
-    // Phase 4: the voxels, each asked for ahead of its write. A voxel's group (a 4^3 region of
-    // 2^3 blocks, voxel_table.h) is its key with the low glog bits of each index cleared,
-    // put together here from the lattice indices, and its block is one of the group's parts,
-    // read without a lock. Each voxel asks the block cache, which mostly holds its group:
-    // checking first whether the group was the previous voxel's (a column crosses a group
-    // every 2^glog voxels, a new one every 2.2 candidates at igea's level 11) cost a
-    // mispredicted branch at half the groups, more than the cache's hash and compare
-    // (bench/README.md, session 47).
-    for (std::size_t j = 0; j < sampled; ++j) {
-      Candidate& cand = batch.cand[batch.sampled[j]];
-      const std::uint32_t ia = std::uint32_t(cand.ia), ib = std::uint32_t(cand.ib), ic = std::uint32_t(cand.ic);
-      const VoxelKey origin{level_bits | std::uint64_t(ia & aligned) << key_a | std::uint64_t(ib & aligned) << key_b |
-                            std::uint64_t(ic & aligned) << key_c};
-      Brick* brick;
-      BlockGroup* const group = cache.group(origin, &brick);
-      const unsigned q = place[((ib & in_group) << shift_b) | ((ic & in_group) << shift_c) | ((ia & in_group) << shift_a)];
-      VoxelData* voxels = group->part[q >> 3].load(std::memory_order_acquire);
-      if (!voxels) voxels = cache.part(*brick, *group, int(q >> 3), log);
-      cand.voxel = voxels + (q & 7);
-      __builtin_prefetch(cand.voxel, 1);
-    }
-    // Phase 5: the writes, four at a time where the depth map has colour (the voxels of an
-    // item are distinct: each gets at most one contribution).
-    std::size_t j = 0;
-    if (!frame.colour.empty()) {
-      for (; j + 4 <= sampled; j += 4) {
-        VoxelData* voxels[4];
-        float distance[4], weight[4];
-        const std::uint8_t* colour[4];
-        for (int lane = 0; lane < 4; ++lane) {
-          const Candidate& cand = batch.cand[batch.sampled[j + lane]];
-          voxels[lane] = cand.voxel;
-          distance[lane] = cand.sample.distance;
-          weight[lane] = cand.sample.weight;
-          colour[lane] = cand.sample.colour;
-        }
-        accumulate4(voxels, distance, weight, colour);
-      }
-    }
-    for (; j < sampled; ++j) {
-      const Candidate& cand = batch.cand[batch.sampled[j]];
-      const VoxelSample& v = cand.sample;
-      accumulate(*cand.voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
-    }
-    return sampled;
+    __builtin_prefetch(&tris[cand.owner]);  // read in the next phase
+    batch.owned[owned++] = k;
   }
+  // Phase 3: distance, weight and colour.
+  const std::size_t sampled = sample_candidates(p, frame, level, centre, options, packed, batch, owned, wide_lanes);
+  // Phase 4: the voxels, each asked for ahead of its write. A voxel's group (a 4^3 region of
+  // 2^3 blocks, voxel_table.h) is its key with the low glog bits of each index cleared,
+  // put together here from the lattice indices, and its block is one of the group's parts,
+  // read without a lock. Each voxel asks the block cache, which mostly holds its group:
+  // checking first whether the group was the previous voxel's (a column crosses a group
+  // every 2^glog voxels, a new one every 2.2 candidates at igea's level 11) cost a
+  // mispredicted branch at half the groups, more than the cache's hash and compare
+  // (bench/README.md, session 47).
+  for (std::size_t j = 0; j < sampled; ++j) {
+    Candidate& cand = batch.cand[batch.sampled[j]];
+    const std::uint32_t ia = std::uint32_t(cand.ia), ib = std::uint32_t(cand.ib), ic = std::uint32_t(cand.ic);
+    const VoxelKey origin{level_bits | std::uint64_t(ia & aligned) << key_a | std::uint64_t(ib & aligned) << key_b |
+                          std::uint64_t(ic & aligned) << key_c};
+    Brick* brick;
+    BlockGroup* const group = cache.group(origin, &brick);
+    const unsigned q = place[((ib & in_group) << shift_b) | ((ic & in_group) << shift_c) | ((ia & in_group) << shift_a)];
+    VoxelData* voxels = group->part[q >> 3].load(std::memory_order_acquire);
+    if (!voxels) voxels = cache.part(*brick, *group, int(q >> 3), log);
+    cand.voxel = voxels + (q & 7);
+    __builtin_prefetch(cand.voxel, 1);
+  }
+  // Phase 5: the writes, four at a time where the depth map has colour (the voxels of an
+  // item are distinct: each gets at most one contribution).
+  std::size_t j = 0;
+  if (!frame.colour.empty()) {
+    for (; j + 4 <= sampled; j += 4) {
+      VoxelData* voxels[4];
+      float distance[4], weight[4];
+      const std::uint8_t* colour[4];
+      for (int lane = 0; lane < 4; ++lane) {
+        const Candidate& cand = batch.cand[batch.sampled[j + lane]];
+        voxels[lane] = cand.voxel;
+        distance[lane] = cand.sample.distance;
+        weight[lane] = cand.sample.weight;
+        colour[lane] = cand.sample.colour;
+      }
+      accumulate4(voxels, distance, weight, colour);
+    }
+  }
+  for (; j < sampled; ++j) {
+    const Candidate& cand = batch.cand[batch.sampled[j]];
+    const VoxelSample& v = cand.sample;
+    accumulate(*cand.voxel, v.distance, v.weight, v.has_colour ? v.colour : nullptr);
+  }
+  return sampled;
 }
 
 }  // namespace

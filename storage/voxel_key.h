@@ -27,16 +27,17 @@ struct VoxelKey {
   std::uint64_t bits = 0;
 
   // The layout, for code that puts keys together field by field (integration's lattice axes).
-  static constexpr std::uint64_t level_bits(int level) { return std::uint64_t(level) << (3 * kCoordBits); }
+  static constexpr int kLevelShift = 3 * kCoordBits;
+  static constexpr std::uint64_t level_bits(int level) { return std::uint64_t(level) << kLevelShift; }
   static constexpr int coord_shift(int axis) { return axis * kCoordBits; }  // axis 0 = x, 1 = y, 2 = z
   static constexpr VoxelKey make(int level, std::uint32_t x, std::uint32_t y, std::uint32_t z) {
     return VoxelKey{level_bits(level) | (std::uint64_t(z) << coord_shift(2)) | (std::uint64_t(y) << coord_shift(1)) |
-                    std::uint64_t(x)};
+                    (std::uint64_t(x) << coord_shift(0))};
   }
-  constexpr int level() const { return int(bits >> (3 * kCoordBits)); }
-  constexpr std::uint32_t x() const { return std::uint32_t(bits & kCoordMask); }
-  constexpr std::uint32_t y() const { return std::uint32_t((bits >> kCoordBits) & kCoordMask); }
-  constexpr std::uint32_t z() const { return std::uint32_t((bits >> (2 * kCoordBits)) & kCoordMask); }
+  constexpr int level() const { return int(bits >> kLevelShift); }
+  constexpr std::uint32_t x() const { return std::uint32_t((bits >> coord_shift(0)) & kCoordMask); }
+  constexpr std::uint32_t y() const { return std::uint32_t((bits >> coord_shift(1)) & kCoordMask); }
+  constexpr std::uint32_t z() const { return std::uint32_t((bits >> coord_shift(2)) & kCoordMask); }
 
   // The same point one level finer (always exists below kMaxLevel).
   constexpr VoxelKey finer() const { return make(level() + 1, 2 * x(), 2 * y(), 2 * z()); }
